@@ -1,0 +1,16 @@
+//! The edgepoint gRPC contract: generated message and service types plus small conversions
+//! shared by every process (vectors, transforms, cameras, the scene content hash).
+#![allow(clippy::all)]
+
+pub mod v1 {
+    tonic::include_proto!("edgepoint.v1");
+}
+
+pub use v1::*;
+
+mod convert;
+pub use convert::*;
+
+/// The encoded file-descriptor set, for reflection or tooling.
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/edgepoint_descriptor.bin"));

@@ -1,0 +1,30 @@
+//! Scene library shared by the renderer and the shader workers.
+//!
+//! A [`Scene`] is a list of [`Object`]s (a welded triangle [`Mesh`] with edge–face
+//! adjacency, one [`Material`] and a default object-to-world transform), a list of
+//! [`Light`]s (point lights and planar convex polygonal area lights), a [`Camera`] and an
+//! ambient term. Meshes are kept in object space: moving an object changes only its
+//! transform, so per-object acceleration structures (BVHs, edge trees) never rebuild.
+//!
+//! Loaders read PLY (binary and ASCII) and OBJ (+MTL colours); built-in procedural scenes
+//! are in [`builtin`].
+
+pub mod builtin;
+pub mod camera;
+pub mod error;
+pub mod light;
+pub mod load;
+pub mod material;
+pub mod mesh;
+pub mod progress;
+mod scene;
+
+pub use camera::Camera;
+pub use error::SceneError;
+pub use light::Light;
+pub use material::Material;
+pub use mesh::{Edge, Mesh, WeldStats, NO_FACE};
+pub use progress::{NoProgress, Progress};
+pub use scene::{Object, Scene};
+
+pub use glam;

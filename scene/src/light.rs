@@ -1,0 +1,121 @@
+//! Lights: point lights and planar convex polygonal area lights (paper 000 §6.3).
+use glam::Vec3;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Light {
+    /// An isotropic point light; `intensity` is radiant intensity (irradiance at 1 unit
+    /// distance facing the light), linear RGB.
+    Point { position: Vec3, intensity: Vec3 },
+    /// A one-sided planar convex polygon emitting `radiance` uniformly from the side its
+    /// normal (counter-clockwise winding) faces.
+    Area { vertices: Vec<Vec3>, radiance: Vec3 },
+}
+
+impl Light {
+    /// Unit normal of an area light (counter-clockwise winding); `None` for point lights.
+    pub fn normal(&self) -> Option<Vec3> {
+        match self {
+            Light::Point { .. } => None,
+            Light::Area { vertices, .. } => Some(polygon_normal(vertices).normalize_or_zero()),
+        }
+    }
+
+    /// Area of an area light (0 for point lights).
+    pub fn area(&self) -> f32 {
+        match self {
+            Light::Point { .. } => 0.0,
+            Light::Area { vertices, .. } => polygon_normal(vertices).length(),
+        }
+    }
+
+    /// Centroid (the position for point lights).
+    pub fn center(&self) -> Vec3 {
+        match self {
+            Light::Point { position, .. } => *position,
+            Light::Area { vertices, .. } => {
+                vertices.iter().copied().sum::<Vec3>() / vertices.len().max(1) as f32
+            }
+        }
+    }
+
+    /// Checks the light is usable: finite values, an area light with at least three
+    /// vertices forming a non-degenerate planar convex polygon.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            Light::Point { position, intensity } => {
+                if !position.is_finite() || !intensity.is_finite() {
+                    return Err("point light has non-finite position or intensity".into());
+                }
+            }
+            Light::Area { vertices, radiance } => {
+                if vertices.len() < 3 {
+                    return Err(format!("area light needs >= 3 vertices, has {}", vertices.len()));
+                }
+                if !radiance.is_finite() || vertices.iter().any(|v| !v.is_finite()) {
+                    return Err("area light has non-finite values".into());
+                }
+                let n = polygon_normal(vertices);
+                if n.length() < 1e-12 {
+                    return Err("area light polygon has zero area".into());
+                }
+                let n = n.normalize();
+                let c = self.center();
+                let size = vertices.iter().map(|v| (*v - c).length()).fold(0.0, f32::max);
+                for v in vertices {
+                    if (*v - c).dot(n).abs() > 1e-4 * size.max(1e-6) {
+                        return Err("area light polygon is not planar".into());
+                    }
+                }
+                let k = vertices.len();
+                for i in 0..k {
+                    let (a, b, d) = (vertices[i], vertices[(i + 1) % k], vertices[(i + 2) % k]);
+                    if (b - a).cross(d - b).dot(n) < -1e-9 * size * size {
+                        return Err("area light polygon is not convex".into());
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Newell's method: the polygon's normal scaled by its area (counter-clockwise winding).
+pub fn polygon_normal(v: &[Vec3]) -> Vec3 {
+    let mut n = Vec3::ZERO;
+    for i in 0..v.len() {
+        let a = v[i];
+        let b = v[(i + 1) % v.len()];
+        n += a.cross(b);
+    }
+    n * 0.5
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn square_light_geometry() {
+        let l = Light::Area {
+            vertices: vec![
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(0.0, 1.0, 2.0),
+                Vec3::new(2.0, 1.0, 2.0),
+                Vec3::new(2.0, 1.0, 0.0),
+            ],
+            radiance: Vec3::ONE,
+        };
+        assert!((l.area() - 4.0).abs() < 1e-6);
+        assert!((l.normal().unwrap() - Vec3::new(0.0, 1.0, 0.0)).length() < 1e-6);
+        assert_eq!(l.center(), Vec3::new(1.0, 1.0, 1.0));
+        l.validate().unwrap();
+    }
+
+    #[test]
+    fn invalid_lights_are_rejected() {
+        let flat = Light::Area { vertices: vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0], radiance: Vec3::ONE };
+        assert!(flat.validate().is_err());
+        let nan = Light::Point { position: Vec3::NAN, intensity: Vec3::ONE };
+        assert!(nan.validate().is_err());
+    }
+}
