@@ -14,3 +14,6 @@ pub use convert::*;
 /// The encoded file-descriptor set, for reflection or tooling.
 pub const FILE_DESCRIPTOR_SET: &[u8] =
     include_bytes!(concat!(env!("OUT_DIR"), "/edgepoint_descriptor.bin"));
+
+mod source;
+pub use source::*;
