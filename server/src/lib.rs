@@ -1,1 +1,23 @@
+//! edgepoint renderer library. Folders follow the per-frame pipeline (DESIGN.md):
+//!
+//! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
+//!   occlusion culling, gap-filling interpolation (no networking).
+//! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
+//!   age, dithered selection of the frame's sample budget (no networking).
+//! - [`image_metrics`] — PSNR / SSIM against reference images.
+//! - [`stage_times`] — per-stage frame timing (paper Table 2 columns).
+//! - [`workers`] — the shader-worker pool: asynchronous request dispatch with back-pressure.
+//! - [`session`] — one render session per viewer: the frame loop thread.
+//! - [`encode`] — frame encodings (raw, QOI, PNG, JPEG).
+//! - [`reference`] — reference renders (1 spp and converged) through the workers.
+//! - [`service`] — the `Renderer` gRPC service.
 
+pub mod encode;
+pub mod image_metrics;
+pub mod reference;
+pub mod render_cache;
+pub mod sampling;
+pub mod service;
+pub mod session;
+pub mod stage_times;
+pub mod workers;
