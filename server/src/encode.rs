@@ -1,1 +1,218 @@
-//! (being written)
+//! Frame encodings for the viewer (DESIGN.md step 12, "Frames to the viewer"): the frame is
+//! kept as linear RGB inside the renderer and leaves as sRGB 8-bit, raw or compressed as the
+//! viewer asked — raw RGB8, QOI (lossless, fastest), PNG (lossless, fast compression level)
+//! or JPEG (quality 90, smallest).
+use crate::image_metrics::linear_to_srgb8;
+use edgepoint_proto::FrameEncoding;
+use glam::Vec3;
+use image::codecs::jpeg::JpegEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::codecs::qoi::QoiEncoder;
+use image::{ExtendedColorType, ImageEncoder, ImageFormat};
+use rayon::prelude::*;
+
+/// JPEG quality used for `FRAME_ENCODING_JPEG`.
+pub const JPEG_QUALITY: u8 = 90;
+
+/// Why a frame could not be encoded or decoded.
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    #[error("frame is {width}x{height} but has {len} pixels")]
+    SizeMismatch { width: u32, height: u32, len: usize },
+    #[error("frame size {width}x{height} is not encodable as {encoding}")]
+    BadSize { width: u32, height: u32, encoding: &'static str },
+    #[error("{encoding} codec failed: {source}")]
+    Image { encoding: &'static str, source: image::ImageError },
+    #[error("decoded {encoding} frame is {got_w}x{got_h}, expected {width}x{height}")]
+    DecodedSize { encoding: &'static str, got_w: u32, got_h: u32, width: u32, height: u32 },
+    #[error("raw frame has {got} bytes, expected {expected}")]
+    RawLength { got: usize, expected: usize },
+}
+
+/// The encoding a request resolves to: `UNSPECIFIED` means QOI.
+pub fn effective_encoding(e: FrameEncoding) -> FrameEncoding {
+    match e {
+        FrameEncoding::Unspecified => FrameEncoding::Qoi,
+        other => other,
+    }
+}
+
+fn name(e: FrameEncoding) -> &'static str {
+    match effective_encoding(e) {
+        FrameEncoding::RawRgb8 => "raw RGB8",
+        FrameEncoding::Qoi => "QOI",
+        FrameEncoding::Png => "PNG",
+        FrameEncoding::Jpeg => "JPEG",
+        FrameEncoding::Unspecified => unreachable!("resolved above"),
+    }
+}
+
+/// Converts a linear frame to interleaved sRGB8 bytes (rows in parallel).
+pub fn to_srgb8(linear: &[Vec3], width: u32, height: u32, out: &mut Vec<u8>) -> Result<(), CodecError> {
+    let n = width as usize * height as usize;
+    if linear.len() != n || n == 0 {
+        return Err(CodecError::SizeMismatch { width, height, len: linear.len() });
+    }
+    out.clear();
+    out.resize(n * 3, 0);
+    let w = width as usize;
+    out.par_chunks_mut(w * 3).zip(linear.par_chunks(w)).for_each(|(dst, src)| {
+        for (d, &c) in dst.chunks_exact_mut(3).zip(src) {
+            d.copy_from_slice(&linear_to_srgb8(c));
+        }
+    });
+    Ok(())
+}
+
+/// Encodes a linear-RGB, row-major frame of `width` x `height` pixels. `UNSPECIFIED` is
+/// encoded as QOI (see [`effective_encoding`]).
+pub fn encode_frame(linear: &[Vec3], width: u32, height: u32, encoding: FrameEncoding) -> Result<Vec<u8>, CodecError> {
+    let mut rgb = Vec::new();
+    to_srgb8(linear, width, height, &mut rgb)?;
+    encode_srgb8(rgb, width, height, encoding)
+}
+
+/// Encodes interleaved sRGB8 bytes (`width * height * 3`).
+pub fn encode_srgb8(rgb: Vec<u8>, width: u32, height: u32, encoding: FrameEncoding) -> Result<Vec<u8>, CodecError> {
+    let encoding = effective_encoding(encoding);
+    let expected = width as usize * height as usize * 3;
+    if rgb.len() != expected || expected == 0 {
+        return Err(CodecError::RawLength { got: rgb.len(), expected });
+    }
+    let enc = name(encoding);
+    let wrap = |source| CodecError::Image { encoding: enc, source };
+    match encoding {
+        FrameEncoding::RawRgb8 => Ok(rgb),
+        FrameEncoding::Qoi => {
+            let mut out = Vec::with_capacity(rgb.len() / 2);
+            QoiEncoder::new(&mut out).write_image(&rgb, width, height, ExtendedColorType::Rgb8).map_err(wrap)?;
+            Ok(out)
+        }
+        FrameEncoding::Png => {
+            let mut out = Vec::with_capacity(rgb.len() / 2);
+            // Fast compression: ~40x quicker than the default level for ~4x the bytes
+            // (STACK.md); a frame must leave within the frame budget.
+            PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Adaptive)
+                .write_image(&rgb, width, height, ExtendedColorType::Rgb8)
+                .map_err(wrap)?;
+            Ok(out)
+        }
+        FrameEncoding::Jpeg => {
+            if width > u16::MAX as u32 || height > u16::MAX as u32 {
+                return Err(CodecError::BadSize { width, height, encoding: enc });
+            }
+            let mut out = Vec::with_capacity(rgb.len() / 8);
+            JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY)
+                .write_image(&rgb, width, height, ExtendedColorType::Rgb8)
+                .map_err(wrap)?;
+            Ok(out)
+        }
+        FrameEncoding::Unspecified => unreachable!("resolved by effective_encoding"),
+    }
+}
+
+/// Decodes a frame made by [`encode_frame`] back to sRGB8 pixels, checking its size.
+pub fn decode_frame(bytes: &[u8], encoding: FrameEncoding, width: u32, height: u32) -> Result<Vec<[u8; 3]>, CodecError> {
+    let encoding = effective_encoding(encoding);
+    let enc = name(encoding);
+    let n = width as usize * height as usize;
+    let flat = match encoding {
+        FrameEncoding::RawRgb8 => {
+            if bytes.len() != n * 3 {
+                return Err(CodecError::RawLength { got: bytes.len(), expected: n * 3 });
+            }
+            bytes.to_vec()
+        }
+        _ => {
+            let fmt = match encoding {
+                FrameEncoding::Qoi => ImageFormat::Qoi,
+                FrameEncoding::Png => ImageFormat::Png,
+                _ => ImageFormat::Jpeg,
+            };
+            let img = image::load_from_memory_with_format(bytes, fmt)
+                .map_err(|source| CodecError::Image { encoding: enc, source })?
+                .into_rgb8();
+            if img.width() != width || img.height() != height {
+                return Err(CodecError::DecodedSize {
+                    encoding: enc,
+                    got_w: img.width(),
+                    got_h: img.height(),
+                    width,
+                    height,
+                });
+            }
+            img.into_raw()
+        }
+    };
+    Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image_metrics::srgb8_to_linear;
+
+    /// A frame with smooth gradients, a hard edge and noise, so every codec path is used.
+    fn test_frame(w: u32, h: u32) -> Vec<Vec3> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let noise = (state >> 40) as f32 / (1u64 << 24) as f32 * 0.05;
+                let edge = if x + 0.3 * y > 0.6 { 0.8 } else { 0.1 };
+                Vec3::new(x, y * y, edge + noise)
+            })
+            .collect()
+    }
+
+    fn srgb_of(frame: &[Vec3]) -> Vec<[u8; 3]> {
+        frame.iter().map(|&c| linear_to_srgb8(c)).collect()
+    }
+
+    #[test]
+    fn lossless_encodings_round_trip_exactly() {
+        let (w, h) = (37, 23);
+        let frame = test_frame(w, h);
+        let want = srgb_of(&frame);
+        for enc in [FrameEncoding::RawRgb8, FrameEncoding::Qoi, FrameEncoding::Png, FrameEncoding::Unspecified] {
+            let bytes = encode_frame(&frame, w, h, enc).unwrap();
+            let got = decode_frame(&bytes, enc, w, h).unwrap();
+            assert_eq!(got, want, "{enc:?} must round-trip exactly");
+        }
+        let raw = encode_frame(&frame, w, h, FrameEncoding::RawRgb8).unwrap();
+        assert_eq!(raw.len(), (w * h * 3) as usize);
+    }
+
+    #[test]
+    fn jpeg_round_trips_closely_and_is_smaller() {
+        let (w, h) = (64, 48);
+        let frame = test_frame(w, h);
+        let want = srgb_of(&frame);
+        let bytes = encode_frame(&frame, w, h, FrameEncoding::Jpeg).unwrap();
+        assert!(bytes.len() < (w * h * 3) as usize);
+        let got = decode_frame(&bytes, FrameEncoding::Jpeg, w, h).unwrap();
+        let lin = |p: &[[u8; 3]]| p.iter().map(|&c| srgb8_to_linear(c)).collect::<Vec<_>>();
+        let psnr = crate::image_metrics::psnr(&lin(&got), &lin(&want));
+        assert!(psnr > 30.0, "JPEG q90 PSNR {psnr} dB");
+        let mean_abs: f64 = got
+            .iter()
+            .zip(&want)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] as f64 - b[k] as f64).abs()))
+            .sum::<f64>()
+            / (want.len() * 3) as f64;
+        assert!(mean_abs < 4.0, "mean abs error {mean_abs}");
+    }
+
+    #[test]
+    fn wrong_sizes_are_errors_not_panics() {
+        let frame = test_frame(8, 8);
+        assert!(matches!(encode_frame(&frame, 8, 9, FrameEncoding::Qoi), Err(CodecError::SizeMismatch { .. })));
+        assert!(encode_frame(&[], 0, 0, FrameEncoding::Png).is_err());
+        let bytes = encode_frame(&frame, 8, 8, FrameEncoding::Png).unwrap();
+        assert!(matches!(decode_frame(&bytes, FrameEncoding::Png, 4, 16), Err(CodecError::DecodedSize { .. })));
+        assert!(decode_frame(&bytes[..10], FrameEncoding::Png, 8, 8).is_err());
+        assert!(decode_frame(&[1, 2, 3], FrameEncoding::RawRgb8, 8, 8).is_err());
+        assert!(decode_frame(b"garbage", FrameEncoding::Qoi, 8, 8).is_err());
+    }
+}

@@ -1,1 +1,11 @@
+//! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
+//! ray requests ([`shade`]) and serves them over gRPC ([`service`]).
+pub mod bvh;
+pub mod loaded;
+mod rng;
+pub mod service;
+pub mod shade;
 
+pub use bvh::{Hit, Instances, SceneBvh};
+pub use loaded::LoadedScene;
+pub use shade::{shade_batch, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

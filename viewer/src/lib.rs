@@ -1,1 +1,22 @@
+//! The edgepoint viewer: the slim client of the `Renderer` gRPC service (DESIGN.md,
+//! "Processes and data flow"). The renderer does all the edge-and-point work; the viewer
+//! sends camera / object moves / settings and shows or stores the frames it gets back.
+//!
+//! The modules are public so that the benchmark and the integration tests reuse them:
+//! - [`local`]: start a local cluster (N workers + one server) as child processes.
+//! - [`client`]: one `Renderer.Session` stream as a typed client.
+//! - [`frame`]: decoding frames (raw / QOI / PNG / JPEG) into RGB images.
+//! - [`headless`]: PNG per frame plus one JSON line of stats per frame.
+//! - [`script`]: scripted camera orbit and object slide; the camera rig keys drive.
+//! - [`window`]: an on-screen window (minifb) when a display exists.
+pub mod client;
+pub mod frame;
+pub mod headless;
+pub mod local;
+pub mod script;
+pub mod window;
 
+pub use client::{scene_source_from_arg, ClientError, Event, SessionClient, SessionSender};
+pub use headless::{FrameStats, HeadlessWriter};
+pub use local::{find_binary, LocalCluster, LocalOptions};
+pub use script::{CameraRig, ObjectSlide, Script};

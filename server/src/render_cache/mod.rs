@@ -1,1 +1,506 @@
-//! (being written)
+//! The Render Cache of paper 000 §4.3 "Point processing" (after Walter et al. 1999): a
+//! fixed-size pool of recently shaded point samples kept as coloured 3D points. Each frame
+//! the points are aged, reprojected with the current camera (nearest point per pixel),
+//! filtered to remove points that their neighbourhood shows to be occluded, and
+//! interpolated to fill the small gaps between them. The resulting per-pixel points
+//! ([`PointImage`]) are what the edge-and-point image is built from (§4.4–4.5); the filled
+//! image and the un-normalised filter weights feed display and prioritized sampling (§5.3).
+//!
+//! Replacement policy when the pool is full (DESIGN.md "Render Cache"): invalid slots
+//! first, then points found hidden (occluded) in the last frame, then the oldest point.
+//! The pool is split into one region per band of [`BAND_ROWS`] image rows, sized in
+//! proportion to the band's pixels, and a sample goes into the region of the row it was
+//! shaded for. Points near each other on screen then sit near each other in memory, which
+//! keeps the per-frame passes' random accesses (depth buffer, point gathers) inside a small
+//! working set instead of the whole pool: reprojection is memory-bound, and this is what
+//! makes it fast. Replacement order holds within each region.
+//!
+//! No networking here; all per-frame buffers are allocated once in [`RenderCache::new`].
+
+mod interpolate;
+mod reproject;
+
+use glam::Vec3;
+use std::collections::VecDeque;
+
+/// Name of the stage (in [`crate::stage_times::StageTimes`]) that projects the points, keeps
+/// the nearest per pixel and culls occluded ones — paper Table 2 "point reprojection".
+pub const STAGE_REPROJECT: &str = "reproject";
+/// Name of the gap-filling interpolation stage.
+pub const STAGE_INTERPOLATE: &str = "interpolate";
+
+/// Image rows per pool region (see the module doc).
+pub const BAND_ROWS: u32 = 8;
+
+/// Age given by [`RenderCache::mark_stale`] (and the largest age reported): larger than any
+/// sensible `max_age_frames`, finite so that it stays distinguishable from "no point"
+/// (`f32::INFINITY`) in age images.
+pub const STALE_AGE: f32 = 1.0e9;
+
+/// A point is occluded when it is farther than its neighbours' depth by more than this
+/// fraction (Walter et al.'s relative depth test).
+pub const DEPTH_CULL_RELATIVE: f32 = 0.1;
+
+/// One shaded point sample as the worker returned it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    pub hit: bool,
+    /// World hit point; for a miss: the unit ray direction (a point at infinity).
+    pub position: Vec3,
+    pub normal: Vec3,
+    /// Linear RGB.
+    pub color: Vec3,
+    /// Object id, `u32::MAX` for a miss.
+    pub object: u32,
+    pub epoch: u64,
+    /// Pixel the sample was requested for.
+    pub pixel: [u32; 2],
+}
+
+/// Size and policy of a [`RenderCache`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CacheConfig {
+    pub width: u32,
+    pub height: u32,
+    /// Pool capacity as a multiple of the pixel count (default 2.0). Clamped to [0, 64].
+    pub points_per_pixel: f32,
+    /// Colour (linear RGB) of pixels no point reaches.
+    pub background: Vec3,
+}
+
+impl CacheConfig {
+    /// Defaults for a `width` x `height` image: 2 points per pixel, black background.
+    pub fn new(width: u32, height: u32) -> Self {
+        Self { width, height, points_per_pixel: 2.0, background: Vec3::ZERO }
+    }
+}
+
+/// Per-frame statistics of [`RenderCache::reproject_and_interpolate`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameCounts {
+    /// Pixels that kept a reprojected point after occlusion culling.
+    pub with_point: u32,
+    /// Pixels without a point, filled by interpolation from neighbours.
+    pub filled: u32,
+    /// Pixels no point reaches (background colour, filter weight 0).
+    pub empty: u32,
+    /// Pixels whose nearest point was culled as occluded.
+    pub occluded: u32,
+    /// Valid points in the cache.
+    pub cache_points: u32,
+}
+
+/// Per-pixel result of reprojection (after occlusion culling) — the later edge-and-point
+/// image (paper §4.3–4.5) reads this. Row-major, `width * height` entries each.
+#[derive(Debug, Clone, Default)]
+pub struct PointImage {
+    pub width: u32,
+    pub height: u32,
+    /// Cache index of the pixel's point, or `u32::MAX`.
+    pub point: Vec<u32>,
+    /// View depth of the point (`f32::INFINITY` for a miss point or no point).
+    pub depth: Vec<f32>,
+    /// Position of the point inside the pixel, in [0, 1)^2.
+    pub subpixel: Vec<[f32; 2]>,
+    /// Point colour (linear RGB); zero where there is no point.
+    pub color: Vec<Vec3>,
+    /// Point age in frames since shading; `f32::INFINITY` where there is no point.
+    pub age: Vec<f32>,
+}
+
+impl PointImage {
+    fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            point: vec![NO_POINT; n],
+            depth: vec![f32::INFINITY; n],
+            subpixel: vec![[0.0; 2]; n],
+            color: vec![Vec3::ZERO; n],
+            age: vec![f32::INFINITY; n],
+        }
+    }
+}
+
+/// A copy of one cached point (see [`RenderCache::point`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CachedPoint {
+    pub hit: bool,
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub color: Vec3,
+    pub object: u32,
+    pub epoch: u64,
+    pub pixel: [u32; 2],
+    /// Frames since the point was shaded ([`STALE_AGE`] after [`RenderCache::mark_stale`]).
+    pub age: f32,
+}
+
+pub(crate) const NO_POINT: u32 = u32::MAX;
+/// Empty entry of the depth buffer: larger than any (depth bits, index) key.
+pub(crate) const EMPTY_KEY: u64 = u64::MAX;
+
+const FLAG_VALID: u8 = 1;
+const FLAG_HIT: u8 = 2;
+
+/// What pass 2 of reprojection reads of a winning point, packed so that one random access
+/// fetches it.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
+pub(crate) struct Shade {
+    pub color: Vec3,
+    /// Frame counter when the point was shaded; age = frames since (wrapping).
+    pub born: u32,
+}
+
+/// Where a point projected in the last frame, with the shading the point image copies from
+/// it: one aligned 32-byte record, so that building the point image costs one random memory
+/// access per pixel (points sit in the pool in replacement order, not in pixel order).
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(32))]
+pub(crate) struct Projected {
+    /// Pixel index, or `NO_POINT` when off-screen, behind the eye, or invalid.
+    pub pixel: u32,
+    pub depth: f32,
+    pub sx: f32,
+    pub sy: f32,
+    pub shade: Shade,
+}
+
+impl Projected {
+    pub(crate) const NONE: Projected =
+        Projected { pixel: NO_POINT, depth: f32::INFINITY, sx: 0.0, sy: 0.0, shade: Shade { color: Vec3::ZERO, born: 0 } };
+}
+
+/// The cached points, structure of arrays so each pass streams only what it reads.
+struct Pool {
+    position: Vec<Vec3>,
+    normal: Vec<Vec3>,
+    shade: Vec<Shade>,
+    object: Vec<u32>,
+    epoch: Vec<u64>,
+    pixel: Vec<[u32; 2]>,
+    flags: Vec<u8>,
+    /// Insertion stamp; matches the oldest-first queue entry while the point lives.
+    stamp: Vec<u64>,
+}
+
+/// Replacement bookkeeping of one pool region (slots `start..end`).
+struct Region {
+    start: u32,
+    end: u32,
+    /// Invalid slots (never used, or invalidated) ready for reuse; popped lowest first.
+    free: Vec<u32>,
+    /// (stamp, slot) in insertion order; entries whose slot was reused since are skipped.
+    oldest: VecDeque<(u64, u32)>,
+    /// Scan position for hidden points to replace within the current frame.
+    hidden_cursor: u32,
+}
+
+impl Region {
+    fn new(start: u32, end: u32) -> Self {
+        let n = (end - start) as usize;
+        let mut oldest = VecDeque::new();
+        oldest.reserve(2 * n + 64);
+        Region { start, end, free: (start..end).rev().collect(), oldest, hidden_cursor: start }
+    }
+}
+
+/// The Render Cache: point pool, replacement bookkeeping and the per-frame images.
+pub struct RenderCache {
+    cfg: CacheConfig,
+    capacity: usize,
+    pool: Pool,
+    valid: usize,
+    /// Pool regions, one per band of `BAND_ROWS` image rows.
+    regions: Vec<Region>,
+    next_stamp: u64,
+    /// Frames reprojected so far (ages are differences of it).
+    frame: u32,
+    // Per-frame buffers.
+    /// Per pixel: (depth bits << 32 | point index), minimum wins; one buffer per worker
+    /// share of the points, merged into the first.
+    zbufs: Vec<Vec<u64>>,
+    /// Per pixel: depth of the nearest point, NaN where none (for the culling test).
+    zdepth: Vec<f32>,
+    /// Per point: where it projected in the last frame.
+    proj: Vec<Projected>,
+    points: PointImage,
+    weights: Vec<f32>,
+    image: Vec<Vec3>,
+}
+
+impl RenderCache {
+    pub fn new(cfg: CacheConfig) -> Self {
+        let pixels = cfg.width as usize * cfg.height as usize;
+        let ppp = if cfg.points_per_pixel.is_finite() { cfg.points_per_pixel.clamp(0.0, 64.0) } else { 2.0 };
+        // Indices must stay below NO_POINT.
+        let capacity = ((pixels as f64 * ppp as f64) as usize).min(NO_POINT as usize - 1);
+        let pool = Pool {
+            position: vec![Vec3::ZERO; capacity],
+            normal: vec![Vec3::ZERO; capacity],
+            shade: vec![Shade::default(); capacity],
+            object: vec![u32::MAX; capacity],
+            epoch: vec![0; capacity],
+            pixel: vec![[0; 2]; capacity],
+            flags: vec![0; capacity],
+            stamp: vec![0; capacity],
+        };
+        // Region of band b: slots in proportion to the pixels before the band.
+        let bands = (cfg.height.div_ceil(BAND_ROWS)).max(1);
+        let slot_at = |row: u32| -> u32 {
+            let px = row.min(cfg.height) as u64 * cfg.width as u64;
+            if pixels == 0 {
+                0
+            } else {
+                (capacity as u64 * px / pixels as u64) as u32
+            }
+        };
+        let regions = (0..bands)
+            .map(|b| {
+                let end = if b + 1 == bands { capacity as u32 } else { slot_at((b + 1) * BAND_ROWS) };
+                Region::new(slot_at(b * BAND_ROWS), end)
+            })
+            .collect();
+        Self {
+            cfg,
+            capacity,
+            pool,
+            valid: 0,
+            regions,
+            next_stamp: 0,
+            frame: 0,
+            zbufs: vec![vec![EMPTY_KEY; pixels]],
+            zdepth: vec![f32::NAN; pixels],
+            proj: vec![Projected::NONE; capacity],
+            points: PointImage::new(cfg.width, cfg.height),
+            weights: vec![0.0; pixels],
+            image: vec![cfg.background; pixels],
+        }
+    }
+
+    pub fn config(&self) -> &CacheConfig {
+        &self.cfg
+    }
+
+    /// Stores a sample in the fixed pool, in the region of its pixel's row band, replacing (in
+    /// this order) an invalid slot, a point that was hidden in the last frame, or the oldest
+    /// point. A pixel row beyond the image counts as the last row. Returns `false` (and stores
+    /// nothing) for a sample with non-finite position or colour, a miss whose direction is
+    /// zero, or a cache of capacity 0.
+    pub fn insert(&mut self, s: &Sample) -> bool {
+        if !s.position.is_finite() || !s.color.is_finite() || (!s.hit && s.position.length_squared() < 1e-12) {
+            return false;
+        }
+        let band = (s.pixel[1] / BAND_ROWS).min(self.regions.len() as u32 - 1) as usize;
+        let Some(slot) = self.take_slot(band) else { return false };
+        let i = slot as usize;
+        let p = &mut self.pool;
+        if p.flags[i] & FLAG_VALID == 0 {
+            self.valid += 1;
+        }
+        p.position[i] = if s.hit { s.position } else { s.position.normalize() };
+        p.normal[i] = if s.normal.is_finite() { s.normal } else { Vec3::ZERO };
+        p.shade[i] = Shade { color: s.color, born: self.frame };
+        p.object[i] = s.object;
+        p.epoch[i] = s.epoch;
+        p.pixel[i] = s.pixel;
+        p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 };
+        p.stamp[i] = self.next_stamp;
+        // Not part of the last frame: never taken for a hidden point.
+        self.proj[i] = Projected::NONE;
+        let r = &mut self.regions[band];
+        r.oldest.push_back((self.next_stamp, slot));
+        self.next_stamp += 1;
+        if r.oldest.len() > 2 * (r.end - r.start) as usize + 64 {
+            // Drop entries of reused slots so the queue stays bounded by the region size.
+            let (flags, stamp) = (&self.pool.flags, &self.pool.stamp);
+            r.oldest.retain(|&(st, j)| flags[j as usize] & FLAG_VALID != 0 && stamp[j as usize] == st);
+        }
+        true
+    }
+
+    /// A slot of region `band`: invalid, else hidden in the last frame, else the oldest.
+    fn take_slot(&mut self, band: usize) -> Option<u32> {
+        if let Some(slot) = self.regions[band].free.pop() {
+            return Some(slot);
+        }
+        let end = self.regions[band].end;
+        while self.regions[band].hidden_cursor < end {
+            let i = self.regions[band].hidden_cursor;
+            self.regions[band].hidden_cursor += 1;
+            if self.pool.flags[i as usize] & FLAG_VALID != 0 && self.was_hidden(i as usize) {
+                return Some(i);
+            }
+        }
+        let p = &self.pool;
+        let r = &mut self.regions[band];
+        while let Some((st, j)) = r.oldest.pop_front() {
+            if p.flags[j as usize] & FLAG_VALID != 0 && p.stamp[j as usize] == st {
+                return Some(j);
+            }
+        }
+        None
+    }
+
+    /// Index of the region holding slot `i`.
+    fn region_of(&self, i: u32) -> usize {
+        self.regions.partition_point(|r| r.end <= i)
+    }
+
+    /// Whether point `i` was hidden in the last frame: culled as occluded, or behind its
+    /// pixel's nearest point by the relative depth threshold, or behind a culled one. Decided
+    /// lazily, when replacement looks for a slot, from the last frame's depth buffer and point
+    /// image (both stay untouched until the next frame), so reprojection spends nothing on
+    /// the points that lost their pixel.
+    fn was_hidden(&self, i: usize) -> bool {
+        let pr = self.proj[i];
+        if pr.pixel == NO_POINT {
+            return false;
+        }
+        let p = pr.pixel as usize;
+        let key = self.zbufs[0][p];
+        let culled = self.points.point[p] == NO_POINT;
+        if key as u32 as usize == i {
+            culled
+        } else {
+            culled || reproject::key_depth(key) * (1.0 + DEPTH_CULL_RELATIVE) < pr.depth
+        }
+    }
+
+    /// Drops every point on one of `objects` (they moved: their cached shading and position
+    /// are wrong). The slots become free for new samples.
+    pub fn invalidate_objects(&mut self, objects: &[u32]) {
+        if objects.is_empty() {
+            return;
+        }
+        let mut sorted = objects.to_vec();
+        sorted.sort_unstable();
+        sorted.dedup();
+        for i in 0..self.capacity {
+            let p = &mut self.pool;
+            if p.flags[i] & FLAG_VALID != 0 && sorted.binary_search(&p.object[i]).is_ok() {
+                p.flags[i] = 0;
+                let r = self.region_of(i as u32);
+                self.regions[r].free.push(i as u32);
+                self.valid -= 1;
+            }
+        }
+        // Reuse lowest slots first, as after construction.
+        for r in &mut self.regions {
+            r.free.sort_unstable_by(|a, b| b.cmp(a));
+        }
+    }
+
+    /// Gives every point maximal age ([`STALE_AGE`]): its shading may have changed (e.g. a
+    /// light or a shadowing object moved), so prioritized sampling re-shades it first and
+    /// replacement takes it before fresh points, but it stays visible until replaced.
+    pub fn mark_stale(&mut self) {
+        let stale_born = self.frame.wrapping_sub(STALE_AGE as u32);
+        for sh in self.pool.shade.iter_mut() {
+            sh.born = stale_born;
+        }
+    }
+
+    /// Age in frames of a point shaded at frame `born`.
+    #[inline]
+    pub(crate) fn age_of(frame: u32, born: u32) -> f32 {
+        (frame.wrapping_sub(born) as f32).min(STALE_AGE)
+    }
+
+    /// Removes every point.
+    pub fn clear(&mut self) {
+        self.pool.flags.iter_mut().for_each(|f| *f = 0);
+        for r in &mut self.regions {
+            r.free.clear();
+            r.free.extend((r.start..r.end).rev());
+            r.oldest.clear();
+        }
+        self.valid = 0;
+    }
+
+    /// Number of valid points.
+    pub fn len(&self) -> usize {
+        self.valid
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.valid == 0
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The point in slot `index` (as found in [`PointImage::point`]), if valid.
+    pub fn point(&self, index: u32) -> Option<CachedPoint> {
+        let i = index as usize;
+        let p = &self.pool;
+        if i >= self.capacity || p.flags[i] & FLAG_VALID == 0 {
+            return None;
+        }
+        Some(CachedPoint {
+            hit: p.flags[i] & FLAG_HIT != 0,
+            position: p.position[i],
+            normal: p.normal[i],
+            color: p.shade[i].color,
+            object: p.object[i],
+            epoch: p.epoch[i],
+            pixel: p.pixel[i],
+            age: Self::age_of(self.frame, p.shade[i].born),
+        })
+    }
+
+    /// One frame: age the points, reproject them with `cam` (nearest point per pixel), cull
+    /// the points their 3x3 neighbourhood shows to be occluded, interpolate to fill gaps ->
+    /// [`Self::image`], [`Self::point_image`], [`Self::filter_weights`]. Times go to
+    /// `times` under [`STAGE_REPROJECT`] and [`STAGE_INTERPOLATE`].
+    ///
+    /// `cam` must be a frame for this cache's image size; a frame of another size is used
+    /// with this cache's size (only its eye, basis and field of view matter).
+    pub fn reproject_and_interpolate(
+        &mut self,
+        cam: &edgepoint_scene::camera::CameraFrame,
+        times: &mut crate::stage_times::StageTimes,
+    ) -> FrameCounts {
+        let mut cam = *cam;
+        cam.width = self.cfg.width;
+        cam.height = self.cfg.height;
+        cam.aspect = self.cfg.width as f32 / self.cfg.height.max(1) as f32;
+        for r in &mut self.regions {
+            r.hidden_cursor = r.start;
+        }
+        self.frame = self.frame.wrapping_add(1);
+        let occluded = times.time(STAGE_REPROJECT, || self.reproject(&cam));
+        let (with_point, filled, empty) = times.time(STAGE_INTERPOLATE, || self.interpolate());
+        FrameCounts { with_point, filled, empty, occluded, cache_points: self.valid as u32 }
+    }
+
+    /// The filled frame: linear RGB, row-major, `width * height`.
+    pub fn image(&self) -> &[Vec3] {
+        &self.image
+    }
+
+    /// The reprojected per-pixel points of the last frame.
+    pub fn point_image(&self) -> &PointImage {
+        &self.points
+    }
+
+    /// Un-normalised interpolation weight per pixel of the last frame (0 where nothing is
+    /// reachable) — the sampling priority's input (§5.3).
+    pub fn filter_weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    pub fn width(&self) -> u32 {
+        self.cfg.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.cfg.height
+    }
+}
+
+#[cfg(test)]
+mod tests;

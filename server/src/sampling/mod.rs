@@ -1,1 +1,292 @@
-//! (being written)
+//! Prioritized sampling, paper 000 §5.3 (as in the Render Cache, Walter et al. 1999 §3.4):
+//! every pixel gets a priority from the last frame — pixels without a point get priority
+//! inversely related to the un-normalised interpolation weight (no reachable point ->
+//! highest), pixels with a point get a priority growing with the point's age — and the
+//! frame's budget of pixels is picked by error diffusion (serpentine Floyd–Steinberg) over
+//! the priority image scaled to sum to the budget, so samples are spread evenly in
+//! proportion to priority. Each pick gets a jittered position inside its pixel.
+//!
+//! The scan's offset and the dither's thresholds change per frame (hashed), so pixels of
+//! equal priority are not picked in the same pattern every frame. No networking, no allocation per frame
+//! once the buffers exist.
+use rayon::prelude::*;
+
+/// Sampling settings the user controls.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SamplingConfig {
+    /// Pixels per new sample (default 64; paper: 40–125).
+    pub sparseness: f64,
+    /// Age in frames at which a point's priority reaches its maximum (default 120).
+    pub max_age_frames: f32,
+}
+
+impl Default for SamplingConfig {
+    fn default() -> Self {
+        Self { sparseness: 64.0, max_age_frames: 120.0 }
+    }
+}
+
+impl SamplingConfig {
+    /// The per-frame sample budget for `pixels` pixels: `ceil(pixels / sparseness)`, at least
+    /// 1 for a non-empty image; a non-finite or < 1 sparseness counts as 1 (every pixel).
+    pub fn budget(&self, pixels: usize) -> usize {
+        if pixels == 0 {
+            return 0;
+        }
+        let s = if self.sparseness.is_finite() && self.sparseness >= 1.0 { self.sparseness } else { 1.0 };
+        ((pixels as f64 / s).ceil() as usize).clamp(1, pixels)
+    }
+}
+
+/// One picked pixel and the jittered continuous image position to shade inside it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelRequest {
+    pub x: u32,
+    pub y: u32,
+    /// Continuous image position in [x, x+1) x [y, y+1) (DESIGN.md conventions).
+    pub sx: f32,
+    pub sy: f32,
+}
+
+/// Priority of a pixel without a point and no reachable point at all.
+pub const PRIORITY_UNREACHED: f32 = 1.0;
+/// Priority of a pixel with a freshly shaded point (never 0, so a converged image keeps
+/// being refreshed everywhere).
+pub const PRIORITY_FRESH_POINT: f32 = 0.02;
+/// Priority of a pixel whose point reached `max_age_frames`.
+pub const PRIORITY_OLD_POINT: f32 = 0.3;
+
+/// Priority of one pixel (see the module doc). `weight` is the un-normalised interpolation
+/// weight, `age` the age of the pixel's point in frames (`f32::INFINITY` if it has none).
+#[inline]
+pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
+    let weight = if weight.is_finite() { weight.max(0.0) } else { 0.0 };
+    if age.is_nan() || age == f32::INFINITY {
+        PRIORITY_UNREACHED / (1.0 + weight)
+    } else {
+        let a = if max_age_frames > 0.0 { (age.max(0.0) / max_age_frames).min(1.0) } else { 1.0 };
+        PRIORITY_FRESH_POINT + (PRIORITY_OLD_POINT - PRIORITY_FRESH_POINT) * a
+    }
+}
+
+/// Picks the pixels to shade each frame.
+pub struct Sampler {
+    width: u32,
+    height: u32,
+    seed: u64,
+    frame: u64,
+    /// Per pixel: expected number of picks this frame, in [0, 1].
+    prio: Vec<f32>,
+    /// Diffused error of the current and the next row (one guard cell each side).
+    err_cur: Vec<f32>,
+    err_next: Vec<f32>,
+}
+
+/// splitmix64 finaliser: a good 64-bit hash of a counter.
+#[inline]
+pub(crate) fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Uniform in [0, 1) from the top 24 bits.
+#[inline]
+fn unit(h: u64) -> f32 {
+    (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+}
+
+/// `x + u` for `u` in [0, 1), kept below `x + 1` despite rounding.
+#[inline]
+fn inside_pixel(x: u32, u: f32) -> f32 {
+    let v = x as f32 + u;
+    let top = (x + 1) as f32;
+    if v < top {
+        v
+    } else {
+        f32::from_bits(top.to_bits() - 1)
+    }
+}
+
+impl Sampler {
+    pub fn new(width: u32, height: u32, seed: u64) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            seed,
+            frame: 0,
+            prio: vec![0.0; n],
+            err_cur: vec![0.0; width as usize + 2],
+            err_next: vec![0.0; width as usize + 2],
+        }
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Frames selected so far.
+    pub fn frame(&self) -> u64 {
+        self.frame
+    }
+
+    /// Priorities from the last frame (low un-normalised filter weight -> high priority, no
+    /// reachable point -> highest, older points -> higher), then a dithered pick of at most
+    /// `budget` distinct pixels (≈ `min(budget, pixels)`) into `out` (cleared first).
+    ///
+    /// Panics if `weights` or `ages` do not have one entry per pixel (a caller bug).
+    pub fn select(&mut self, weights: &[f32], ages: &[f32], cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
+        out.clear();
+        let (w, h) = (self.width as usize, self.height as usize);
+        let n = w * h;
+        assert_eq!(weights.len(), n, "sampler: {} weights for a {w}x{h} image", weights.len());
+        assert_eq!(ages.len(), n, "sampler: {} ages for a {w}x{h} image", ages.len());
+        let frame = self.frame;
+        self.frame += 1;
+        let budget = budget.min(n);
+        if budget == 0 {
+            return;
+        }
+        if budget == n {
+            // Every pixel: no priorities needed.
+            let key = mix64(self.seed ^ mix64(frame));
+            for y in 0..h as u32 {
+                for x in 0..w as u32 {
+                    let hsh = mix64(mix64(key ^ (y as u64 * w as u64 + x as u64)));
+                    out.push(PixelRequest { x, y, sx: inside_pixel(x, unit(hsh)), sy: inside_pixel(y, unit(hsh << 24)) });
+                }
+            }
+            return;
+        }
+        let max_age = cfg.max_age_frames;
+        let total: f64 = self
+            .prio
+            .par_chunks_mut(w)
+            .enumerate()
+            .map(|(y, row)| {
+                let mut s = 0.0f64;
+                for (x, p) in row.iter_mut().enumerate() {
+                    *p = priority(weights[y * w + x], ages[y * w + x], max_age);
+                    s += *p as f64;
+                }
+                s
+            })
+            .sum();
+        self.scale_to_budget(total, budget as f64);
+        self.dither(frame, budget, out);
+    }
+
+    /// Scales the priorities so they sum to `budget` with each capped at 1 (a pixel is picked
+    /// at most once): water-filling, a few passes when some pixels saturate.
+    fn scale_to_budget(&mut self, total: f64, budget: f64) {
+        let mut s = budget / total.max(f64::MIN_POSITIVE);
+        for _ in 0..16 {
+            let (saturated, rest): (f64, f64) = self
+                .prio
+                .par_chunks(16 * 1024)
+                .map(|c| {
+                    let (mut sat, mut rest) = (0.0f64, 0.0f64);
+                    for &p in c {
+                        if p as f64 * s >= 1.0 {
+                            sat += 1.0;
+                        } else {
+                            rest += p as f64;
+                        }
+                    }
+                    (sat, rest)
+                })
+                .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            if saturated == 0.0 || rest <= 0.0 {
+                break;
+            }
+            let next = (budget - saturated).max(0.0) / rest;
+            // Raising s only adds saturated pixels; stop once it no longer moves.
+            if next <= s * (1.0 + 1e-6) {
+                break;
+            }
+            s = next;
+        }
+        let s = s as f32;
+        self.prio.par_chunks_mut(16 * 1024).for_each(|c| c.iter_mut().for_each(|p| *p = (*p * s).min(1.0)));
+    }
+
+    /// Serpentine Floyd–Steinberg over the scaled priorities; stops at `budget` picks.
+    ///
+    /// Per frame, the scan runs over the image shifted cyclically by a random offset, starts
+    /// in alternating directions and uses hashed thresholds, so equal-priority pixels are not
+    /// picked in the same pattern every frame.
+    fn dither(&mut self, frame: u64, budget: usize, out: &mut Vec<PixelRequest>) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let frame_key = mix64(self.seed ^ mix64(frame));
+        let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
+        let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
+        self.err_cur.iter_mut().for_each(|e| *e = 0.0);
+        self.err_next.iter_mut().for_each(|e| *e = 0.0);
+        let flip = frame & 1 == 1;
+        for ly in 0..h {
+            let y = (ly + oy) % h;
+            let left_to_right = (ly % 2 == 0) != flip;
+            let row = &self.prio[y * w..(y + 1) * w];
+            for step in 0..w {
+                // Logical column lx indexes the error buffers (guard cells at 0 and w+1).
+                let lx = if left_to_right { step } else { w - 1 - step };
+                let x = (lx + ox) % w;
+                let (ahead, behind) = if left_to_right { (lx + 2, lx) } else { (lx, lx + 2) };
+                let q = row[x];
+                let v = q + self.err_cur[lx + 1];
+                let hsh = mix64(frame_key ^ ((y * w + x) as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93));
+                let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
+                let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
+                    let h2 = mix64(hsh);
+                    out.push(PixelRequest {
+                        x: x as u32,
+                        y: y as u32,
+                        sx: inside_pixel(x as u32, unit(h2)),
+                        sy: inside_pixel(y as u32, unit(h2 << 24)),
+                    });
+                    if out.len() == budget {
+                        return;
+                    }
+                    v - 1.0
+                } else {
+                    v
+                };
+                self.err_cur[ahead] += e * (7.0 / 16.0);
+                self.err_next[behind] += e * (3.0 / 16.0);
+                self.err_next[lx + 1] += e * (5.0 / 16.0);
+                self.err_next[ahead] += e * (1.0 / 16.0);
+            }
+            // Fold the error pushed past the row's ends back into the image instead of
+            // losing it: at sparse priorities the lost error would cost a good part of the
+            // budget. The row ended at the left edge when scanning left-to-right and vice versa.
+            let end = if left_to_right { w + 1 } else { 0 };
+            let end_cell = if left_to_right { w } else { 1 };
+            self.err_next[end_cell] += self.err_cur[end];
+            self.err_next[1] += self.err_next[0];
+            self.err_next[w] += self.err_next[w + 1];
+            self.err_next[0] = 0.0;
+            self.err_next[w + 1] = 0.0;
+            std::mem::swap(&mut self.err_cur, &mut self.err_next);
+            self.err_next.iter_mut().for_each(|e| *e = 0.0);
+        }
+    }
+}
+
+/// Range of the per-pixel dither threshold (hashed per frame). A fixed threshold of 0.5
+/// turns flat priority areas into a regular lattice and leaves up to half a pick of error
+/// pending in every column at the end of the scan — at 1/64 density about 10% of the
+/// budget. A uniform random threshold makes each pick's probability exactly the diffused
+/// value, so the expected count is the budget, while the diffusion still spreads the picks
+/// evenly (measured at 1/64 density: mean nearest-pick distance 5.5 px vs 4.0 for
+/// independent random picks and 5.9 for the fixed threshold).
+const THRESHOLD_LO: f32 = 0.0;
+const THRESHOLD_HI: f32 = 1.0;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,331 @@
+//! `edgepoint-bench frame` and `edgepoint-bench reference`.
+//!
+//! `frame` runs what a user runs — a local cluster (server + workers as child processes) and a
+//! headless session — for N frames with a static camera, then renders, through the same
+//! workers and shader, the converged reference (many samples per pixel, cached on disk) and
+//! a 1-sample-per-pixel full ray trace (timed: the baseline for the speedup, paper Table 2
+//! "Full RT" and "Speedup").
+use crate::reference_cache::RefCache;
+use crate::stats::{mean, median};
+use anyhow::{bail, Context, Result};
+use edgepoint_proto as pb;
+use edgepoint_server::image_metrics::{psnr, srgb8_to_linear, ssim};
+use edgepoint_server::reference::{render_reference, LogProgress, ReferenceImage};
+use edgepoint_server::workers::WorkerPool;
+use edgepoint_viewer::client::{camera_from_wire, scene_source_from_arg, Event, SessionClient};
+use edgepoint_viewer::local::{LocalCluster, LocalOptions};
+use glam::Vec3;
+use serde_json::json;
+use std::collections::{BTreeMap, HashMap};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Options shared by `frame` and `reference`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Built-in scene name (cornell, cornell-point) or a .ply / .obj file.
+    #[arg(long, default_value = "cornell")]
+    pub scene: String,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Number of shader-worker processes to start.
+    #[arg(long, default_value_t = 2)]
+    pub workers: usize,
+    /// Threads per worker process (default: the worker's choice, all cores).
+    #[arg(long)]
+    pub worker_threads: Option<usize>,
+    /// Shader name.
+    #[arg(long, default_value = "direct")]
+    pub shader: String,
+    /// Shader parameter KEY=VALUE (repeatable), e.g. shadow_rays=16.
+    #[arg(long = "shader-param", value_parser = parse_param)]
+    pub shader_params: Vec<(String, f64)>,
+    /// Samples per pixel of the converged reference.
+    #[arg(long, default_value_t = 64)]
+    pub reference_spp: u32,
+    /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
+    #[arg(long, default_value = "target/edgepoint-refs")]
+    pub ref_cache: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct FrameArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Frames to run the session for; statistics cover all of them, PSNR the last.
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Pixels per new sample per frame (the paper's sparseness ratio target; server default 64).
+    #[arg(long)]
+    pub sparseness: Option<f64>,
+    /// Frame-rate cap of the server's frame loop (server default 30).
+    #[arg(long)]
+    pub max_fps: Option<f64>,
+    /// Skip the reference renders (no PSNR, no speedup).
+    #[arg(long)]
+    pub no_reference: bool,
+    /// Write the last frame and the references as PNG files into this directory.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ReferenceArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Directory for reference_1spp.png and reference_<spp>spp.png.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_param(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
+    let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
+    Ok((k.trim().to_string(), v))
+}
+
+fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
+    LocalCluster::start(LocalOptions {
+        workers: a.workers,
+        worker_threads: a.worker_threads,
+        log_level: Some(std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into())),
+        ..Default::default()
+    })
+    .context("starting the local cluster (run `cargo build --release` first)")
+}
+
+/// The two reference renders of a frame setup.
+pub struct References {
+    pub converged: ReferenceImage,
+    pub converged_cached: bool,
+    pub one_spp: ReferenceImage,
+}
+
+/// Renders (or loads from the cache) the converged reference, and always renders the
+/// timed 1-spp full ray trace, through the cluster's workers.
+async fn references(
+    cluster: &LocalCluster,
+    a: &SceneArgs,
+    source: &pb::SceneSource,
+    camera: &edgepoint_scene::Camera,
+) -> Result<References> {
+    let hash = edgepoint_proto::scene_hash(source);
+    let endpoints = cluster.worker_addrs().iter().map(|w| format!("http://{w}")).collect();
+    let pool = WorkerPool::new(endpoints)?;
+    let dispatcher = pool.open(source.clone(), hash.clone());
+    let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
+    let cache = RefCache::new(&a.ref_cache);
+    let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp, &a.shader, &params);
+    let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp) {
+        Some(img) => (img, true),
+        None => {
+            let progress = LogProgress::new(&format!("reference {}spp", a.reference_spp));
+            let img = render_reference(&dispatcher, camera, a.width, a.height, a.reference_spp, &a.shader, &params, &progress)
+                .await
+                .context("converged reference render")?;
+            cache.store(&key, &img)?;
+            (img, false)
+        }
+    };
+    let progress = LogProgress::new("full ray trace 1spp");
+    let one_spp = render_reference(&dispatcher, camera, a.width, a.height, 1, &a.shader, &params, &progress)
+        .await
+        .context("1-spp full ray trace")?;
+    Ok(References { converged, converged_cached, one_spp })
+}
+
+fn write_png(path: &std::path::Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
+    let mut bytes = Vec::with_capacity(linear.len() * 3);
+    for c in linear {
+        bytes.extend_from_slice(&edgepoint_server::image_metrics::linear_to_srgb8(*c));
+    }
+    image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgb8)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+pub fn run(args: FrameArgs) -> Result<()> {
+    let a = &args.scene;
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let source = scene_source_from_arg(&a.scene)?;
+    let cluster = start_cluster(a)?;
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    rt.block_on(async {
+        let start = pb::Start {
+            scene: Some(source.clone()),
+            width: a.width,
+            height: a.height,
+            shader: a.shader.clone(),
+            shader_params: a.shader_params.iter().cloned().collect(),
+            encoding: pb::FrameEncoding::Qoi as i32,
+            settings: Some(pb::Settings {
+                sparseness: args.sparseness.unwrap_or(0.0),
+                max_fps: args.max_fps.unwrap_or(0.0),
+                ..Default::default()
+            }),
+            camera: None,
+        };
+        let t0 = Instant::now();
+        let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
+        let camera = camera_from_wire(started.camera.as_ref().context("server sent no camera")?);
+        let session_start_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+        let mut stage_ms: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        let mut stage_order: Vec<String> = Vec::new();
+        let mut totals = Vec::new();
+        let mut samples = Vec::new();
+        let mut last: Option<pb::Frame> = None;
+        let mut first_at: Option<Instant> = None;
+        let mut dropped = 0u64;
+        let mut classes = (0u64, 0u64, 0u64);
+        while (totals.len() as u32) < args.frames {
+            let ev = tokio::time::timeout(Duration::from_secs(60), client.next_event())
+                .await
+                .context("no frame for 60 s")?;
+            match ev {
+                None => bail!("the session ended after {} frames", totals.len()),
+                Some(Err(e)) => return Err(e.into()),
+                Some(Ok(Event::Rejected(r))) => bail!("server rejected a message: {}", r.message),
+                Some(Ok(Event::Frame(f))) => {
+                    first_at.get_or_insert_with(Instant::now);
+                    for s in &f.stages {
+                        if !stage_ms.contains_key(&s.stage) {
+                            stage_order.push(s.stage.clone());
+                        }
+                        stage_ms.entry(s.stage.clone()).or_default().push(s.ms);
+                    }
+                    totals.push(f.total_ms);
+                    samples.push(f.samples_used as f64);
+                    dropped = f.frames_dropped;
+                    if let Some(p) = &f.pixels {
+                        classes.0 += p.empty_class as u64;
+                        classes.1 += p.simple_class as u64;
+                        classes.2 += p.complex_class as u64;
+                    }
+                    last = Some(f);
+                }
+            }
+        }
+        let wall = first_at.map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
+        drop(client);
+        let last = last.expect("at least one frame");
+        let img = edgepoint_viewer::frame::decode_frame(&last)?;
+        let frame_lin: Vec<Vec3> = img.pixels().map(|p| srgb8_to_linear(p.0)).collect();
+
+        let pixels = a.width as f64 * a.height as f64;
+        let mean_samples = mean(&samples);
+        // Frames after the first arrive at the loop's pace; the first waits for the session.
+        let fps = if totals.len() > 1 && wall > 0.0 { (totals.len() - 1) as f64 / wall } else { 0.0 };
+        let median_total = median(&totals);
+        let mut out = json!({
+            "scene": a.scene,
+            "width": a.width,
+            "height": a.height,
+            "workers": a.workers,
+            "worker_threads": a.worker_threads,
+            "shader": a.shader,
+            "frames": totals.len(),
+            "session_start_ms": session_start_ms,
+            "stages_median_ms": stage_order.iter().map(|s| (s.clone(), json!(median(&stage_ms[s])))).collect::<serde_json::Map<_, _>>(),
+            "total_median_ms": median_total,
+            "pipeline_fps": if median_total > 0.0 { 1000.0 / median_total } else { 0.0 },
+            "fps": fps,
+            "samples_per_frame_mean": mean_samples,
+            "samples_per_frame_median": median(&samples),
+            "sparseness_ratio": if mean_samples > 0.0 { pixels / mean_samples } else { f64::INFINITY },
+            "frames_dropped": dropped,
+            "last_frame_sequence": last.sequence,
+        });
+        if let Some(dir) = &args.out {
+            std::fs::create_dir_all(dir)?;
+            write_png(&dir.join("last_frame.png"), a.width, a.height, &frame_lin)?;
+        }
+        if !args.no_reference {
+            let refs = references(&cluster, a, &source, &camera).await?;
+            let p = psnr(&frame_lin, &refs.converged.pixels);
+            let s = ssim(&frame_lin, &refs.converged.pixels, a.width, a.height);
+            let p1 = psnr(&refs.one_spp.pixels, &refs.converged.pixels);
+            let full_rt_s = refs.one_spp.elapsed.as_secs_f64();
+            out["reference_spp"] = json!(a.reference_spp);
+            out["reference_cached"] = json!(refs.converged_cached);
+            out["psnr_last_frame_db"] = json!(p);
+            out["ssim_last_frame"] = json!(s);
+            out["psnr_full_rt_1spp_db"] = json!(p1);
+            out["full_rt_1spp_s"] = json!(full_rt_s);
+            // Paper Table 2: "Full RT (s)" over the frame's total pipeline time.
+            out["speedup_vs_full_rt"] = json!(if median_total > 0.0 { full_rt_s * 1e3 / median_total } else { 0.0 });
+            if let Some(dir) = &args.out {
+                write_png(&dir.join(format!("reference_{}spp.png", a.reference_spp)), a.width, a.height, &refs.converged.pixels)?;
+                write_png(&dir.join("reference_1spp.png"), a.width, a.height, &refs.one_spp.pixels)?;
+            }
+        }
+        let mut table = String::new();
+        use std::fmt::Write;
+        writeln!(table, "frame benchmark: {} {}x{}, {} workers, {} frames", a.scene, a.width, a.height, a.workers, totals.len())?;
+        for s in &stage_order {
+            writeln!(table, "  {:<14} {:>8.2} ms (median)", s, median(&stage_ms[s]))?;
+        }
+        writeln!(table, "  {:<14} {:>8.2} ms (median) -> pipeline {:.1} fps", "total", median_total, out["pipeline_fps"].as_f64().unwrap_or(0.0))?;
+        writeln!(table, "  delivered fps  {fps:.1}; samples/frame {mean_samples:.0}; sparseness ratio {:.1}", out["sparseness_ratio"].as_f64().unwrap_or(0.0))?;
+        if let Some(p) = out.get("psnr_last_frame_db") {
+            writeln!(
+                table,
+                "  PSNR frame {} vs {}spp reference: {:.2} dB (SSIM {:.4}); 1-spp full RT: {:.2} dB in {:.2} s; speedup {:.1}x",
+                last.sequence,
+                a.reference_spp,
+                p.as_f64().unwrap_or(0.0),
+                out["ssim_last_frame"].as_f64().unwrap_or(0.0),
+                out["psnr_full_rt_1spp_db"].as_f64().unwrap_or(0.0),
+                out["full_rt_1spp_s"].as_f64().unwrap_or(0.0),
+                out["speedup_vs_full_rt"].as_f64().unwrap_or(0.0),
+            )?;
+        }
+        crate::emit(args.json, &out, &table);
+        Ok(())
+    })
+}
+
+pub fn run_reference(args: ReferenceArgs) -> Result<()> {
+    let a = &args.scene;
+    let source = scene_source_from_arg(&a.scene)?;
+    let scene = edgepoint_proto::scene_from_source(&source, &edgepoint_scene::NoProgress)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let cluster = start_cluster(a)?;
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    rt.block_on(async {
+        let refs = references(&cluster, a, &source, &scene.camera).await?;
+        std::fs::create_dir_all(&args.out)?;
+        let conv = args.out.join(format!("reference_{}spp.png", a.reference_spp));
+        let one = args.out.join("reference_1spp.png");
+        write_png(&conv, a.width, a.height, &refs.converged.pixels)?;
+        write_png(&one, a.width, a.height, &refs.one_spp.pixels)?;
+        let out = json!({
+            "scene": a.scene, "width": a.width, "height": a.height, "workers": a.workers,
+            "reference_spp": a.reference_spp,
+            "converged_s": refs.converged.elapsed.as_secs_f64(), "converged_cached": refs.converged_cached,
+            "full_rt_1spp_s": refs.one_spp.elapsed.as_secs_f64(),
+            "psnr_1spp_vs_converged_db": psnr(&refs.one_spp.pixels, &refs.converged.pixels),
+            "files": [conv.display().to_string(), one.display().to_string()],
+        });
+        let table = format!(
+            "references of {} at {}x{}: {}spp in {:.2} s{}, 1spp in {:.2} s ({:.2} dB vs converged)\n  {}\n  {}\n",
+            a.scene, a.width, a.height, a.reference_spp, refs.converged.elapsed.as_secs_f64(),
+            if refs.converged_cached { " (cached)" } else { "" },
+            refs.one_spp.elapsed.as_secs_f64(), out["psnr_1spp_vs_converged_db"].as_f64().unwrap_or(0.0),
+            conv.display(), one.display()
+        );
+        crate::emit(args.json, &out, &table);
+        Ok(())
+    })
+}

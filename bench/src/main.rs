@@ -1,0 +1,65 @@
+//! `edgepoint-bench`: measurements of the whole system, printed as a table or as JSON
+//! (`--json`). Every speed figure comes with a baseline measured in the same process
+//! (a full ray trace, the shader called in-process, one worker), because the machines are
+//! noisy and only ratios travel.
+//!
+//! Subcommands:
+//! - `frame`: a headless session for N frames (server + workers + this process as the
+//!   viewer): per-stage medians, fps, samples per frame, sparseness ratio, PSNR/SSIM of the
+//!   last frame against a converged reference rendered through the same workers, and the
+//!   speedup over a 1-sample-per-pixel full ray trace with the same workers.
+//! - `throughput`: samples/s of 1..K workers at batch size B, their scaling, and the gRPC
+//!   overhead against calling the shader in-process with the same thread count.
+//! - `load`: scene load (parse + weld + adjacency) and BVH build times.
+//! - `reference`: render the 1-spp and converged references of a scene to PNG files.
+mod frame;
+mod load;
+mod reference_cache;
+mod stats;
+mod throughput;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(name = "edgepoint-bench", version, about = "Benchmarks for edgepoint (JSON output with --json)")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Headless session for N frames: per-stage ms, fps, samples/frame, PSNR vs converged reference.
+    Frame(frame::FrameArgs),
+    /// Worker sample throughput for 1..K workers, scaling, and gRPC overhead vs in-process shading.
+    Throughput(throughput::ThroughputArgs),
+    /// Scene load, weld and BVH build times.
+    Load(load::LoadArgs),
+    /// Render the 1-spp and converged reference images of a scene through local workers.
+    Reference(frame::ReferenceArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.cmd {
+        Cmd::Frame(a) => frame::run(a),
+        Cmd::Throughput(a) => throughput::run(a),
+        Cmd::Load(a) => load::run(a),
+        Cmd::Reference(a) => frame::run_reference(a),
+    }
+}
+
+/// Prints `value` as pretty JSON when `json` is set, else the human `table` text.
+pub fn emit(json: bool, value: &serde_json::Value, table: &str) {
+    if json {
+        println!("{}", serde_json::to_string_pretty(value).expect("json"));
+    } else {
+        print!("{table}");
+    }
+}

@@ -1,0 +1,185 @@
+//! `edgepoint-bench throughput`: how many samples per second K shader workers deliver for a
+//! shader at batch size B, how that scales from 1 to K workers, and what the gRPC path costs
+//! against calling the same shader in this process with the same number of threads.
+use anyhow::{Context, Result};
+use edgepoint_proto as pb;
+use edgepoint_server::workers::WorkerPool;
+use edgepoint_viewer::client::scene_source_from_arg;
+use edgepoint_viewer::local::{LocalCluster, LocalOptions};
+use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
+use serde_json::json;
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args, Debug)]
+pub struct ThroughputArgs {
+    /// Built-in scene name or a .ply / .obj file.
+    #[arg(long, default_value = "cornell")]
+    pub scene: String,
+    /// Largest number of worker processes (runs 1..=K).
+    #[arg(long, default_value_t = 2)]
+    pub workers: usize,
+    /// Threads per worker process, and of the in-process baseline.
+    #[arg(long, default_value_t = 1)]
+    pub worker_threads: usize,
+    /// Requests per batch.
+    #[arg(long, default_value_t = 256)]
+    pub batch: usize,
+    /// Batches in flight at once per worker.
+    #[arg(long, default_value_t = 4)]
+    pub window: usize,
+    /// Shader name.
+    #[arg(long, default_value = "direct")]
+    pub shader: String,
+    /// Shader parameter KEY=VALUE (repeatable).
+    #[arg(long = "shader-param", value_parser = parse_param)]
+    pub shader_params: Vec<(String, f64)>,
+    /// Seconds of shading per measurement.
+    #[arg(long, default_value_t = 3.0)]
+    pub seconds: f64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_param(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
+    Ok((k.trim().to_string(), v.trim().parse().map_err(|_| format!("'{v}' is not a number"))?))
+}
+
+/// Random primary rays through a 512x512 image of the scene camera: the same mix the
+/// renderer requests (sparse pixels all over the image).
+struct RayGen {
+    cam: edgepoint_scene::camera::CameraFrame,
+    state: u64,
+    next_id: u64,
+}
+
+impl RayGen {
+    fn new(camera: &edgepoint_scene::Camera, seed: u64) -> Self {
+        RayGen { cam: camera.frame(512, 512), state: seed | 1, next_id: 0 }
+    }
+    fn uniform(&mut self) -> f32 {
+        // xorshift64*: enough for spreading rays over the image.
+        self.state ^= self.state >> 12;
+        self.state ^= self.state << 25;
+        self.state ^= self.state >> 27;
+        (self.state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn batch(&mut self, n: usize) -> Vec<RayRequest> {
+        (0..n)
+            .map(|_| {
+                let (sx, sy) = (self.uniform() * 512.0, self.uniform() * 512.0);
+                let (origin, direction) = self.cam.ray(sx, sy);
+                self.next_id += 1;
+                RayRequest { id: self.next_id, pixel: [sx as u32, sy as u32], origin, direction }
+            })
+            .collect()
+    }
+}
+
+fn to_wire(id: u64, epoch: u64, shader: &str, params: &HashMap<String, f64>, reqs: Vec<RayRequest>) -> pb::RequestBatch {
+    pb::RequestBatch {
+        batch_id: id,
+        epoch,
+        shader: shader.to_string(),
+        params: params.clone(),
+        seed: id,
+        requests: reqs
+            .into_iter()
+            .map(|r| pb::ShadeRequest {
+                id: r.id,
+                pixel_x: r.pixel[0],
+                pixel_y: r.pixel[1],
+                origin: Some(r.origin.into()),
+                direction: Some(r.direction.into()),
+            })
+            .collect(),
+    }
+}
+
+pub fn run(a: ThroughputArgs) -> Result<()> {
+    let source = scene_source_from_arg(&a.scene)?;
+    let hash = edgepoint_proto::scene_hash(&source);
+    let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
+    let spec = ShaderSpec::parse(&a.shader, &params).map_err(|e| anyhow::anyhow!(e))?;
+    let scene = edgepoint_proto::scene_from_source(&source, &edgepoint_scene::NoProgress).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let camera = scene.camera;
+
+    // In-process baseline: the shader called directly, same thread count as one worker.
+    let transforms: Vec<_> = scene.objects.iter().map(|o| o.transform).collect();
+    let loaded = LoadedScene::build(scene, hash.clone(), &edgepoint_scene::NoProgress);
+    let inst = loaded.instances(&transforms);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.worker_threads.max(1)).build()?;
+    let mut gen = RayGen::new(&camera, 7);
+    let (mut n, t) = (0u64, Instant::now());
+    let deadline = Duration::from_secs_f64(a.seconds);
+    let mut seed = 0;
+    while t.elapsed() < deadline {
+        let reqs = gen.batch(a.batch);
+        seed += 1;
+        let out = pool.install(|| shade_batch(&loaded, &inst, &spec, seed, &reqs));
+        n += out.samples.len() as u64;
+    }
+    let inproc_rate = n as f64 / t.elapsed().as_secs_f64();
+    drop(loaded);
+
+    let cluster = LocalCluster::start(LocalOptions {
+        workers: a.workers.max(1),
+        worker_threads: Some(a.worker_threads.max(1)),
+        log_level: Some(std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into())),
+        ..Default::default()
+    })
+    .context("starting workers (run `cargo build --release` first)")?;
+    let endpoints: Vec<String> = cluster.worker_addrs().iter().map(|w| format!("http://{w}")).collect();
+
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    let mut runs = Vec::new();
+    for k in 1..=a.workers.max(1) {
+        let rate = rt.block_on(async {
+            let wp = WorkerPool::new(endpoints[..k].to_vec())?;
+            let d = wp.open(source.clone(), hash.clone());
+            let mut gen = RayGen::new(&camera, 11 + k as u64);
+            let shader = a.shader.clone();
+            // Warm-up: the workers load the scene and open their streams.
+            let warm: Vec<_> = (0..k as u64 * 2).map(|i| to_wire(i + 1, 0, &shader, &params, gen.batch(a.batch))).collect();
+            d.shade_all(warm, k * 2, Duration::from_secs(120), |_| {}).await?;
+            let mut next = 1000u64;
+            let start = Instant::now();
+            let mut samples = 0u64;
+            let batches = std::iter::from_fn(|| {
+                if start.elapsed() >= deadline {
+                    return None;
+                }
+                next += 1;
+                Some(to_wire(next, 0, &shader, &params, gen.batch(a.batch)))
+            });
+            d.shade_all(batches, a.window.max(1) * k, Duration::from_secs(60), |b| samples += b.samples.len() as u64)
+                .await?;
+            anyhow::Ok(samples as f64 / start.elapsed().as_secs_f64())
+        })?;
+        runs.push(rate);
+    }
+    let one = runs[0];
+    let out = json!({
+        "scene": a.scene,
+        "shader": a.shader,
+        "batch": a.batch,
+        "worker_threads": a.worker_threads,
+        "seconds": a.seconds,
+        "in_process_samples_per_s": inproc_rate,
+        "grpc_samples_per_s": runs,
+        "scaling": runs.iter().map(|r| r / one).collect::<Vec<_>>(),
+        "grpc_overhead_fraction": 1.0 - one / inproc_rate,
+    });
+    let mut table = format!(
+        "throughput {} shader={} batch={} threads/worker={}\n  in-process: {:.0} samples/s\n",
+        a.scene, a.shader, a.batch, a.worker_threads, inproc_rate
+    );
+    for (i, r) in runs.iter().enumerate() {
+        table += &format!("  {} worker(s): {:.0} samples/s (x{:.2})\n", i + 1, r, r / one);
+    }
+    table += &format!("  gRPC overhead vs in-process (1 worker): {:.1} %\n", 100.0 * (1.0 - one / inproc_rate));
+    crate::emit(a.json, &out, &table);
+    Ok(())
+}

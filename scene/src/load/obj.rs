@@ -1,0 +1,180 @@
+//! Wavefront OBJ reader (+ MTL colours). `v` and `f` (forms `v`, `v/vt`, `v//vn`, `v/vt/vn`,
+//! negative = relative indices; polygons fan-triangulated); `o` / `g` start a new object and
+//! `usemtl` a new material run: each (object, material) run becomes one scene object.
+//! `mtllib` files are looked up among the given files by base name; MTL `Kd` is the diffuse
+//! colour and `Ke` the emission. Other statements are ignored.
+use crate::error::SceneError;
+use crate::load::NamedBytes;
+use crate::{Material, Progress};
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// One (object, material) run of faces, indices into the file's global vertex list.
+pub struct Run {
+    pub name: String,
+    pub material: Material,
+    pub triangles: Vec<[u32; 3]>,
+    /// Source polygons (for emissive faces that become area lights).
+    pub polygons: Vec<Vec<u32>>,
+}
+
+pub struct ObjData {
+    pub positions: Vec<Vec3>,
+    pub runs: Vec<Run>,
+}
+
+fn base_name(s: &str) -> &str {
+    s.rsplit(['/', '\\']).next().unwrap_or(s)
+}
+
+fn parse_f32(name: &str, ln: usize, tok: Option<&str>, what: &str) -> Result<f32, SceneError> {
+    let t = tok.ok_or_else(|| SceneError::line(name, ln, format!("missing {what}")))?;
+    let v: f32 = t.parse().map_err(|_| SceneError::line(name, ln, format!("{what} `{t}` is not a number")))?;
+    if !v.is_finite() {
+        return Err(SceneError::line(name, ln, format!("{what} `{t}` is not finite")));
+    }
+    Ok(v)
+}
+
+/// Parses an MTL file into materials by name.
+pub fn read_mtl(name: &str, data: &[u8]) -> Result<HashMap<String, Material>, SceneError> {
+    let text = std::str::from_utf8(data).map_err(|_| SceneError::file(name, "MTL file is not UTF-8 text"))?;
+    let mut out = HashMap::new();
+    let mut cur: Option<Material> = None;
+    for (i, line) in text.lines().enumerate() {
+        let ln = i + 1;
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("newmtl") => {
+                if let Some(m) = cur.take() {
+                    out.insert(m.name.clone(), m);
+                }
+                let n = w.next().ok_or_else(|| SceneError::line(name, ln, "`newmtl` needs a name"))?;
+                cur = Some(Material::diffuse(n, Vec3::splat(0.7)));
+            }
+            Some(k @ ("Kd" | "Ke")) => {
+                let m = cur.as_mut().ok_or_else(|| SceneError::line(name, ln, format!("`{k}` before any `newmtl`")))?;
+                let c = Vec3::new(
+                    parse_f32(name, ln, w.next(), "red")?,
+                    parse_f32(name, ln, w.next(), "green")?,
+                    parse_f32(name, ln, w.next(), "blue")?,
+                );
+                if k == "Kd" {
+                    m.diffuse = c.clamp(Vec3::ZERO, Vec3::ONE);
+                } else {
+                    m.emission = c.max(Vec3::ZERO);
+                }
+            }
+            _ => {}
+        }
+    }
+    if let Some(m) = cur.take() {
+        out.insert(m.name.clone(), m);
+    }
+    Ok(out)
+}
+
+/// Parses an OBJ file; `others` are the files it may reference (MTL).
+pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -> Result<ObjData, SceneError> {
+    let name = main.name.as_str();
+    let text = std::str::from_utf8(&main.data).map_err(|_| SceneError::file(name, "OBJ file is not UTF-8 text"))?;
+    progress.begin(&format!("parse {name}"), text.len() as u64);
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut materials: HashMap<String, Material> = HashMap::new();
+    let mut runs: Vec<Run> = Vec::new();
+    let mut obj_name = String::new();
+    let mut mat = Material::default();
+    let mut run_open = false;
+    let mut poly: Vec<u32> = Vec::new();
+    let mut done = 0u64;
+    for (i, line) in text.lines().enumerate() {
+        let ln = i + 1;
+        done += line.len() as u64 + 1;
+        if ln % 100_000 == 0 {
+            progress.advance(done);
+            done = 0;
+        }
+        let line = line.split('#').next().unwrap_or("");
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("v") => {
+                let v = Vec3::new(
+                    parse_f32(name, ln, w.next(), "x")?,
+                    parse_f32(name, ln, w.next(), "y")?,
+                    parse_f32(name, ln, w.next(), "z")?,
+                );
+                positions.push(v);
+            }
+            Some("f") => {
+                poly.clear();
+                for tok in w {
+                    let first = tok.split('/').next().unwrap_or("");
+                    let idx: i64 = first.parse().map_err(|_| {
+                        SceneError::line(name, ln, format!("face vertex `{tok}` does not start with a vertex index"))
+                    })?;
+                    let n = positions.len() as i64;
+                    let abs = if idx > 0 { idx - 1 } else { n + idx };
+                    if idx == 0 || abs < 0 || abs >= n {
+                        return Err(SceneError::line(
+                            name,
+                            ln,
+                            format!("face refers to vertex {idx} but {n} vertices are defined so far"),
+                        ));
+                    }
+                    poly.push(abs as u32);
+                }
+                if poly.len() < 3 {
+                    return Err(SceneError::line(name, ln, format!("face has {} vertices; at least 3 are needed", poly.len())));
+                }
+                if !run_open {
+                    let n = if obj_name.is_empty() { "object".to_string() } else { obj_name.clone() };
+                    // The same object and material again continue their earlier run.
+                    match runs.iter().position(|r| r.name == n && r.material.name == mat.name) {
+                        Some(k) => {
+                            let r = runs.remove(k);
+                            runs.push(r);
+                        }
+                        None => runs.push(Run { name: n, material: mat.clone(), triangles: Vec::new(), polygons: Vec::new() }),
+                    }
+                    run_open = true;
+                }
+                let run = runs.last_mut().expect("open run");
+                for k in 1..poly.len() - 1 {
+                    run.triangles.push([poly[0], poly[k], poly[k + 1]]);
+                }
+                run.polygons.push(poly.clone());
+            }
+            Some("o") | Some("g") => {
+                obj_name = w.collect::<Vec<_>>().join(" ");
+                run_open = false;
+            }
+            Some("usemtl") => {
+                let m = w.next().ok_or_else(|| SceneError::line(name, ln, "`usemtl` needs a material name"))?;
+                mat = materials.get(m).cloned().unwrap_or_else(|| Material { name: m.to_string(), ..Material::default() });
+                run_open = false;
+            }
+            Some("mtllib") => {
+                for lib in w {
+                    match others.iter().find(|f| base_name(&f.name) == base_name(lib)) {
+                        Some(f) => materials.extend(read_mtl(&f.name, &f.data)?),
+                        None => tracing::warn!("{name}:{ln}: material library {lib} was not given; using default materials"),
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    progress.advance(done);
+    progress.end();
+    // Runs of the same object with several materials get the material in their name.
+    let mut counts: HashMap<String, usize> = HashMap::new();
+    for r in &runs {
+        *counts.entry(r.name.clone()).or_default() += 1;
+    }
+    for r in &mut runs {
+        if counts[&r.name] > 1 {
+            r.name = format!("{}:{}", r.name, r.material.name);
+        }
+    }
+    Ok(ObjData { positions, runs })
+}

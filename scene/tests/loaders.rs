@@ -1,0 +1,213 @@
+//! PLY / OBJ loaders on the shared real meshes and on malformed input.
+use edgepoint_scene::load::{load_files, load_path, NamedBytes};
+use edgepoint_scene::{NoProgress, Scene, SceneError};
+use std::path::PathBuf;
+
+fn data(rel: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} not found", p.display());
+        None
+    }
+}
+
+fn load(name: &str, bytes: &[u8]) -> Result<Scene, SceneError> {
+    load_files(&[NamedBytes { name: name.into(), data: bytes.to_vec() }], &NoProgress)
+}
+
+#[test]
+fn bunny_loads_and_welds() {
+    let Some(p) = data("bunny/bun_zipper.ply") else { return };
+    let s = load_path(&p, &NoProgress).unwrap();
+    let m = &s.objects[0].mesh;
+    assert_eq!(m.stats.input_triangles, 69_451);
+    assert_eq!(m.stats.input_vertices, 35_947);
+    // 1,113 unreferenced vertices are dropped by compaction.
+    assert_eq!(m.positions.len(), 35_947 - 1_113);
+    assert_eq!(m.boundary_edges(), 223);
+    assert_eq!(s.objects[1].name, "floor", "staged on a floor");
+    assert_eq!(s.lights.len(), 1);
+    s.validate().unwrap();
+}
+
+#[test]
+fn dragon_welds_to_a_closed_surface() {
+    let Some(p) = data("dragon/dragon_vrip.ply") else { return };
+    let t = std::time::Instant::now();
+    let s = load_path(&p, &NoProgress).unwrap();
+    eprintln!("dragon load + weld + adjacency: {:.0} ms", t.elapsed().as_secs_f64() * 1e3);
+    let m = &s.objects[0].mesh;
+    assert_eq!(m.stats.input_triangles, 871_414);
+    assert_eq!(m.stats.degenerate_dropped, 108);
+    assert_eq!(m.triangles.len(), 871_306);
+    assert_eq!(m.boundary_edges(), 0);
+    assert_eq!(m.stats.non_manifold_edges, 0);
+    assert!(m.signed_volume() > 0.0, "outward winding");
+}
+
+#[test]
+fn torus_is_closed_genus_one() {
+    let Some(p) = data("torus/torus.obj") else { return };
+    let s = load_path(&p, &NoProgress).unwrap();
+    let m = &s.objects[0].mesh;
+    assert_eq!(m.triangles.len(), 4_608);
+    assert_eq!(m.boundary_edges(), 0);
+    let euler = m.positions.len() as i64 - m.edges.len() as i64 + m.triangles.len() as i64;
+    assert_eq!(euler, 0, "V - E + F = 0 for genus 1");
+}
+
+#[test]
+fn cornell_official_obj_has_its_objects() {
+    let Some(p) = data("cornell_box/cornell_box_official.obj") else { return };
+    let s = load_path(&p, &NoProgress).unwrap();
+    let names: Vec<&str> = s.objects.iter().map(|o| o.name.as_str()).collect();
+    for n in ["floor", "ceiling", "back", "greenwall", "redwall", "smallbox", "largebox", "luminaire"] {
+        assert!(names.contains(&n), "{n} in {names:?}");
+    }
+    let ceiling = &s.objects[s.object_id("ceiling").unwrap() as usize];
+    assert_eq!(ceiling.mesh.triangles.len(), 4, "two quads");
+    assert_eq!(s.object_id("smallbox").map(|i| s.objects[i as usize].mesh.triangles.len()), Some(12));
+}
+
+fn tetra_ply(format: &str) -> Vec<u8> {
+    let pos: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let faces: [[i32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    let mut out = format!(
+        "ply\nformat {format} 1.0\ncomment test\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nelement face 4\nproperty list uchar int vertex_indices\nproperty short flags\nend_header\n"
+    )
+    .into_bytes();
+    for p in pos {
+        match format {
+            "ascii" => out.extend(format!("{} {} {} 7\n", p[0], p[1], p[2]).bytes()),
+            "binary_little_endian" => {
+                p.iter().for_each(|v| out.extend(v.to_le_bytes()));
+                out.push(7);
+            }
+            _ => {
+                p.iter().for_each(|v| out.extend(v.to_be_bytes()));
+                out.push(7);
+            }
+        }
+    }
+    for f in faces {
+        match format {
+            "ascii" => out.extend(format!("3 {} {} {} -2\n", f[0], f[1], f[2]).bytes()),
+            "binary_little_endian" => {
+                out.push(3);
+                f.iter().for_each(|v| out.extend(v.to_le_bytes()));
+                out.extend((-2i16).to_le_bytes());
+            }
+            _ => {
+                out.push(3);
+                f.iter().for_each(|v| out.extend(v.to_be_bytes()));
+                out.extend((-2i16).to_be_bytes());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn ascii_and_binary_ply_agree() {
+    let a = load("t.ply", &tetra_ply("ascii")).unwrap();
+    let le = load("t.ply", &tetra_ply("binary_little_endian")).unwrap();
+    let be = load("t.ply", &tetra_ply("binary_big_endian")).unwrap();
+    for s in [&le, &be] {
+        assert_eq!(s.objects[0].mesh.positions, a.objects[0].mesh.positions);
+        assert_eq!(s.objects[0].mesh.triangles, a.objects[0].mesh.triangles);
+    }
+    let m = &a.objects[0].mesh;
+    assert_eq!((m.triangles.len(), m.edges.len(), m.boundary_edges()), (4, 6, 0));
+}
+
+fn err(name: &str, bytes: &[u8]) -> String {
+    load(name, bytes).err().unwrap_or_else(|| panic!("{name} should fail")).to_string()
+}
+
+#[test]
+fn malformed_files_name_the_file_and_place() {
+    let good = String::from_utf8(tetra_ply("ascii")).unwrap();
+    // A non-number in vertex 1 (line 14 of the file: 12 header lines, then vertex 0).
+    let bad = good.replacen("1 0 0 7", "1 0 oops 7", 1);
+    let e = err("bad.ply", bad.as_bytes());
+    assert!(e.contains("bad.ply") && e.contains("vertex 1") && e.contains("line 14") && e.contains("oops"), "{e}");
+    // An index out of range.
+    let bad = good.replacen("3 1 2 3 -2", "3 1 2 9 -2", 1);
+    let e = err("idx.ply", bad.as_bytes());
+    assert!(e.contains("idx.ply") && e.contains("face 3") && e.contains("vertex 9"), "{e}");
+    // Truncated binary data.
+    let bin = tetra_ply("binary_little_endian");
+    let e = err("cut.ply", &bin[..bin.len() - 5]);
+    assert!(e.contains("cut.ply") && e.contains("face 3") && e.contains("truncated"), "{e}");
+    // Header problems.
+    assert!(err("h.ply", b"ply\nformat ascii 1.0\nelement vertex x\nend_header\n").contains("h.ply:3"));
+    assert!(err("n.ply", b"plx\n").contains("not a PLY"));
+    assert!(err("f.ply", b"ply\nformat weird 1.0\nend_header\n").contains("unsupported PLY format"));
+    // Non-finite coordinates.
+    let bad = good.replacen("0 1 0 7", "0 inf 0 7", 1);
+    assert!(err("inf.ply", bad.as_bytes()).contains("not finite"));
+    // A face with two vertices.
+    let bad = good.replacen("3 0 2 1 -2", "2 0 2 -2", 1);
+    assert!(err("two.ply", bad.as_bytes()).contains("at least 3"));
+    // OBJ: bad number, bad index, unsupported extension, empty.
+    let e = err("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 x 0\nf 1 2 3\n");
+    assert!(e.starts_with("m.obj:3:"), "{e}");
+    let e = err("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+    assert!(e.starts_with("m.obj:4:") && e.contains("vertex 4"), "{e}");
+    assert!(err("m.stl", b"solid").contains("unsupported scene file type"));
+    assert!(err("e.obj", b"").contains("empty"));
+}
+
+#[test]
+fn obj_objects_materials_and_emitters() {
+    let obj = b"mtllib m.mtl\no box\nusemtl red\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nusemtl lamp\nv 0 2 0\nv 1 2 0\nv 1 2 1\nv 0 2 1\nf -4 -3 -2 -1\n";
+    let mtl = b"newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0.5 0.5 0.5\nKe 4 4 4\n";
+    let s = load_files(
+        &[NamedBytes { name: "a/s.obj".into(), data: obj.to_vec() }, NamedBytes { name: "a/m.mtl".into(), data: mtl.to_vec() }],
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(s.objects.len(), 2);
+    assert_eq!(s.objects[0].material.diffuse.x, 0.8);
+    assert_eq!(s.objects[1].name, "box:lamp");
+    assert_eq!(s.lights.len(), 1, "the emissive quad is an area light");
+    assert!(s.lights[0].area() > 0.99);
+    // Negative (relative) indices resolved to the last four vertices.
+    assert!(s.objects[1].mesh.positions.iter().all(|p| p.y == 2.0));
+}
+
+#[test]
+fn corrupted_files_never_panic() {
+    let mut seeds = 0x1234_5678u64;
+    let mut next = || {
+        seeds = seeds.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seeds >> 33) as usize
+    };
+    for fmt in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let good = tetra_ply(fmt);
+        for _ in 0..300 {
+            let mut b = good.clone();
+            match next() % 3 {
+                0 => b.truncate(next() % b.len()),
+                1 => {
+                    let i = next() % b.len();
+                    b[i] = next() as u8;
+                }
+                _ => {
+                    let i = next() % b.len();
+                    b.insert(i, next() as u8);
+                }
+            }
+            let _ = load("x.ply", &b);
+        }
+    }
+    let good = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec();
+    for _ in 0..300 {
+        let mut b = good.clone();
+        let i = next() % b.len();
+        b[i] = next() as u8;
+        let _ = load("x.obj", &b);
+    }
+}

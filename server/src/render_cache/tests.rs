@@ -1,0 +1,597 @@
+//! Tests of the Render Cache against brute-force oracles on random cases.
+use super::interpolate::INTERP_SIGMA;
+use super::*;
+use crate::stage_times::StageTimes;
+use edgepoint_scene::camera::{Camera, CameraFrame};
+
+/// splitmix64, deterministic test randomness.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn f(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.f()
+    }
+    fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
+        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+    }
+    fn color(&mut self) -> Vec3 {
+        self.vec(0.0, 1.0)
+    }
+}
+
+fn hit(position: Vec3, color: Vec3, object: u32) -> Sample {
+    Sample { hit: true, position, normal: Vec3::Y, color, object, epoch: 1, pixel: [0, 0] }
+}
+
+fn miss(direction: Vec3, color: Vec3) -> Sample {
+    Sample { hit: false, position: direction.normalize(), normal: Vec3::ZERO, color, object: u32::MAX, epoch: 1, pixel: [0, 0] }
+}
+
+/// The sample with the pixel it was shaded for.
+fn at(mut s: Sample, x: u32, y: u32) -> Sample {
+    s.pixel = [x, y];
+    s
+}
+
+fn camera(eye: Vec3, target: Vec3, w: u32, h: u32) -> CameraFrame {
+    Camera { eye, target, up: Vec3::Y, fov_y_degrees: 50.0 }.frame(w, h)
+}
+
+fn cache(w: u32, h: u32, ppp: f32) -> RenderCache {
+    RenderCache::new(CacheConfig { width: w, height: h, points_per_pixel: ppp, background: Vec3::new(0.1, 0.2, 0.3) })
+}
+
+fn frame(c: &mut RenderCache, cam: &CameraFrame) -> FrameCounts {
+    c.reproject_and_interpolate(cam, &mut StageTimes::new())
+}
+
+/// Independent projection for the oracle: hits through `CameraFrame::project`, misses as the
+/// direction's vanishing point.
+fn oracle_project(cam: &CameraFrame, p: &CachedPoint) -> Option<(usize, f32)> {
+    let (sx, sy, z) = if p.hit {
+        cam.project(p.position)?
+    } else {
+        let d = p.position;
+        let z = d.dot(cam.forward);
+        if z <= 1e-6 {
+            return None;
+        }
+        let x = d.dot(cam.right) / (z * cam.tan_half_y * cam.aspect);
+        let y = d.dot(cam.up) / (z * cam.tan_half_y);
+        ((x + 1.0) * 0.5 * cam.width as f32, (1.0 - y) * 0.5 * cam.height as f32, f32::INFINITY)
+    };
+    if !(sx >= 0.0 && sy >= 0.0 && sx < cam.width as f32 && sy < cam.height as f32) {
+        return None;
+    }
+    Some((sy.floor() as usize * cam.width as usize + sx.floor() as usize, z))
+}
+
+#[test]
+fn reprojection_and_culling_match_brute_force() {
+    let mut rng = Rng(11);
+    let (mut total_culled, mut total_kept) = (0, 0);
+    for case in 0..12 {
+        let (w, h) = (8 + (rng.next() % 40) as u32, 8 + (rng.next() % 30) as u32);
+        let mut c = cache(w, h, 1.0 + rng.f() * 3.0);
+        let eye = rng.vec(-4.0, 4.0) + Vec3::new(0.0, 0.0, 6.0);
+        let cam = camera(eye, rng.vec(-0.5, 0.5), w, h);
+        let n = c.capacity() + c.capacity() / 3; // overfill: replacement runs too
+        for _ in 0..n {
+            let s = match rng.next() % 10 {
+                0 => miss(rng.vec(-1.0, 1.0), rng.color()),
+                // Several points on few depths make exact depth ties (index decides).
+                1 => hit(Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), 0.0), rng.color(), 1),
+                _ => hit(rng.vec(-2.0, 2.0), rng.color(), 2),
+            };
+            // The pixel it was "shaded for": where it projects, else anywhere.
+            let (x, y) = match cam.project(s.position) {
+                Some((sx, sy, _)) if s.hit && sx >= 0.0 && sy >= 0.0 => (sx as u32, sy as u32),
+                _ => ((rng.next() % w as u64) as u32, (rng.next() % h as u64) as u32),
+            };
+            assert!(c.insert(&at(s, x.min(w - 1), y.min(h - 1))));
+        }
+        let counts = frame(&mut c, &cam);
+
+        // Nearest point per pixel by a naive loop.
+        let px = (w * h) as usize;
+        let mut best = vec![EMPTY_KEY; px];
+        for i in 0..c.capacity() as u32 {
+            let Some(p) = c.point(i) else { continue };
+            assert_eq!(p.age, 1.0, "one frame ages every point once");
+            if let Some((pix, z)) = oracle_project(&cam, &p) {
+                best[pix] = best[pix].min((u64::from(z.to_bits()) << 32) | u64::from(i));
+            }
+        }
+        for (pix, b) in best.iter().enumerate() {
+            assert_eq!(c.zbufs[0][pix], *b, "case {case}: winner of pixel {pix}");
+        }
+
+        // Culling oracle: some opposite pair of neighbours both nearer by the relative
+        // threshold, and no opposite pair with one nearer and the other farther by it.
+        let depth = |k: u64| f32::from_bits((k >> 32) as u32);
+        let t = 1.0 + DEPTH_CULL_RELATIVE;
+        let (mut culled, mut kept) = (0u32, 0u32);
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                let i = (y * w as i64 + x) as usize;
+                let pi = c.point_image();
+                if best[i] == EMPTY_KEY {
+                    assert_eq!(pi.point[i], NO_POINT);
+                    assert_eq!(pi.age[i], f32::INFINITY);
+                    continue;
+                }
+                let dc = depth(best[i]);
+                let at = |dx: i64, dy: i64| -> Option<f32> {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                        return None;
+                    }
+                    let k = best[(ny * w as i64 + nx) as usize];
+                    (k != EMPTY_KEY).then(|| depth(k))
+                };
+                let is_near = |d: Option<f32>| d.is_some_and(|d| d * t < dc);
+                let is_far = |d: Option<f32>| d.is_some_and(|d| d > dc * t);
+                let mut sandwich = false;
+                let mut bracket = false;
+                for dy in -1..=1i64 {
+                    for dx in -1..=1i64 {
+                        if dx == 0 && dy == 0 {
+                            continue;
+                        }
+                        sandwich |= is_near(at(dx, dy)) && is_near(at(-dx, -dy));
+                        bracket |= is_near(at(dx, dy)) && is_far(at(-dx, -dy));
+                    }
+                }
+                let occluded = sandwich && !bracket;
+                let winner = best[i] as u32;
+                if occluded {
+                    culled += 1;
+                    assert_eq!(pi.point[i], NO_POINT, "case {case}: pixel {i} should be culled");
+                } else {
+                    kept += 1;
+                    assert_eq!(pi.point[i], winner, "case {case}: pixel {i} should keep its winner");
+                    let p = c.point(winner).unwrap();
+                    assert_eq!(pi.color[i], p.color);
+                    assert_eq!(pi.depth[i], dc);
+                    assert_eq!(pi.age[i], 1.0);
+                    // Subpixel position reproduces the projection.
+                    let [u, v] = pi.subpixel[i];
+                    assert!((0.0..1.0).contains(&u) && (0.0..1.0).contains(&v));
+                    let (sx, sy) = if p.hit {
+                        let (sx, sy, _) = cam.project(p.position).unwrap();
+                        (sx, sy)
+                    } else {
+                        let d = p.position;
+                        let z = d.dot(cam.forward);
+                        let xx = d.dot(cam.right) / (z * cam.tan_half_y * cam.aspect);
+                        let yy = d.dot(cam.up) / (z * cam.tan_half_y);
+                        ((xx + 1.0) * 0.5 * w as f32, (1.0 - yy) * 0.5 * h as f32)
+                    };
+                    assert!((x as f32 + u - sx).abs() < 1e-4 && (y as f32 + v - sy).abs() < 1e-4);
+                }
+            }
+        }
+        assert_eq!(counts.occluded, culled, "case {case}");
+        assert_eq!(counts.with_point, kept, "case {case}");
+        assert_eq!(counts.with_point + counts.filled + counts.empty, w * h);
+        assert_eq!(counts.cache_points as usize, c.len());
+        total_culled += culled;
+        total_kept += kept;
+
+        // Hidden points are marked for replacement: culled winners, and points behind their
+        // pixel's winner (by the threshold, or behind a culled winner).
+        for i in 0..c.capacity() as u32 {
+            let Some(p) = c.point(i) else { continue };
+            let want = match oracle_project(&cam, &p) {
+                None => false,
+                Some((pix, z)) => {
+                    let wk = best[pix];
+                    let winner = wk as u32;
+                    let winner_culled = c.point_image().point[pix] == NO_POINT;
+                    if winner == i {
+                        winner_culled
+                    } else {
+                        winner_culled || depth(wk) * (1.0 + DEPTH_CULL_RELATIVE) < z
+                    }
+                }
+            };
+            assert_eq!(c.was_hidden(i as usize), want, "case {case}: hidden flag of point {i}");
+        }
+    }
+    assert!(total_culled > 20 && total_kept > 1000, "the random scenes should exercise both ({total_culled}, {total_kept})");
+}
+
+/// Ray-traces a little scene (a sphere before a slanted plane, sky elsewhere) at pixel
+/// centres: one sample per pixel, random colours.
+fn one_sample_per_pixel(c: &mut RenderCache, cam: &CameraFrame, rng: &mut Rng) -> Vec<Vec3> {
+    let (w, h) = (c.width(), c.height());
+    let centre = Vec3::new(0.3, 0.2, 0.0);
+    let radius = 0.8;
+    let plane_n = Vec3::new(0.2, 0.3, 1.0).normalize();
+    let plane_d = -1.5; // plane: n.p = d
+    let mut colors = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (o, d) = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
+            let mut t_hit = f32::INFINITY;
+            let mut obj = u32::MAX;
+            let oc = o - centre;
+            let b = oc.dot(d);
+            let disc = b * b - (oc.length_squared() - radius * radius);
+            if disc >= 0.0 {
+                let t = -b - disc.sqrt();
+                if t > 0.0 {
+                    t_hit = t;
+                    obj = 0;
+                }
+            }
+            let denom = plane_n.dot(d);
+            if denom.abs() > 1e-6 {
+                let t = (plane_d - plane_n.dot(o)) / denom;
+                if t > 0.0 && t < t_hit && (o + d * t).x.abs() < 1.0 {
+                    t_hit = t;
+                    obj = 1;
+                }
+            }
+            let col = rng.color();
+            colors.push(col);
+            let mut s = if obj == u32::MAX { miss(d, col) } else { hit(o + d * t_hit, col, obj) };
+            s.pixel = [x, y];
+            assert!(c.insert(&s));
+        }
+    }
+    colors
+}
+
+#[test]
+fn static_camera_with_one_point_per_pixel_reproduces_the_colours() {
+    let mut rng = Rng(5);
+    for &(w, h) in &[(64u32, 48u32), (33, 71)] {
+        let mut c = cache(w, h, 2.0);
+        let cam = camera(Vec3::new(0.5, 0.8, 5.0), Vec3::ZERO, w, h);
+        let colors = one_sample_per_pixel(&mut c, &cam, &mut rng);
+        let objects: std::collections::HashSet<u32> = (0..c.capacity() as u32).filter_map(|i| c.point(i)).map(|p| p.object).collect();
+        assert_eq!(objects.len(), 3, "sphere, plane and sky are all in view: {objects:?}");
+        for _ in 0..2 {
+            let counts = frame(&mut c, &cam);
+            assert_eq!(counts.with_point, w * h, "no pixel lost its point (nothing culled at silhouettes)");
+            assert_eq!(counts.occluded, 0);
+            assert_eq!(c.image(), &colors[..]);
+        }
+    }
+}
+
+/// A grid of points at the pixel centres of a plane facing the camera at distance `z`.
+fn plane_points(cam: &CameraFrame, depth: f32) -> Vec<Vec3> {
+    let mut v = Vec::new();
+    for y in 0..cam.height {
+        for x in 0..cam.width {
+            let (o, d) = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
+            v.push(o + d * (depth / d.dot(cam.forward)));
+        }
+    }
+    v
+}
+
+#[test]
+fn occluded_point_in_a_gap_is_culled_and_filled() {
+    let (w, h) = (15u32, 11u32);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let near = plane_points(&cam, 3.0);
+    let (cx, cy) = (7usize, 5usize);
+    let gap = cy * w as usize + cx;
+    let mut c = cache(w, h, 2.0);
+    let mut rng = Rng(9);
+    let mut colors = vec![Vec3::ZERO; near.len()];
+    for (i, p) in near.iter().enumerate() {
+        if i != gap {
+            colors[i] = rng.color();
+            c.insert(&at(hit(*p, colors[i], 0), i as u32 % w, i as u32 / w));
+        }
+    }
+    // A far point (background wall) showing through the gap.
+    let (o, d) = cam.ray(cx as f32 + 0.5, cy as f32 + 0.5);
+    let far = o + d * 9.0;
+    c.insert(&at(hit(far, Vec3::new(5.0, 0.0, 0.0), 1), cx as u32, cy as u32));
+    let far_slot = (0..c.capacity() as u32).find(|&i| c.point(i).map(|p| p.object) == Some(1)).unwrap();
+    let counts = frame(&mut c, &cam);
+    assert_eq!(counts.occluded, 1);
+    assert_eq!(c.point_image().point[gap], NO_POINT);
+    assert!(c.was_hidden(far_slot as usize));
+    // Filled from the eight near neighbours with the Gaussian kernel (points at centres).
+    let mut want = Vec3::ZERO;
+    let mut ws = 0.0;
+    for dy in -1..=1i32 {
+        for dx in -1..=1i32 {
+            if dx == 0 && dy == 0 {
+                continue;
+            }
+            let j = (cy as i32 + dy) as usize * w as usize + (cx as i32 + dx) as usize;
+            let wt = (-((dx * dx + dy * dy) as f32) / (2.0 * INTERP_SIGMA * INTERP_SIGMA)).exp();
+            want += colors[j] * wt;
+            ws += wt;
+        }
+    }
+    want /= ws;
+    let got = c.image()[gap];
+    assert!((got - want).abs().max_element() < 1e-3, "filled {got} vs {want}");
+    assert!((c.filter_weights()[gap] - ws).abs() < 1e-2 * ws);
+    assert_eq!(counts.filled, 1);
+}
+
+#[test]
+fn background_showing_through_a_sparse_surface_is_culled() {
+    // Near surface sampled on a checkerboard (half density, as after moving closer) in front
+    // of a densely sampled wall: every wall point between near points is culled, and the
+    // wall around the near surface is kept.
+    let (w, h) = (24u32, 20u32);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let near = plane_points(&cam, 2.0);
+    let wall = plane_points(&cam, 6.0);
+    let mut c = cache(w, h, 2.0);
+    let inside = |x: u32, y: u32| (4..w - 4).contains(&x) && (4..h - 4).contains(&y);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if inside(x, y) && (x + y) % 2 == 0 {
+                c.insert(&at(hit(near[i], Vec3::X, 0), x, y));
+            } else {
+                c.insert(&at(hit(wall[i], Vec3::Y, 1), x, y));
+            }
+        }
+    }
+    let counts = frame(&mut c, &cam);
+    let pi = c.point_image();
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let p = pi.point[i];
+            let interior = (5..w - 5).contains(&x) && (5..h - 5).contains(&y);
+            if interior && (x + y) % 2 == 1 {
+                assert_eq!(p, NO_POINT, "wall point at {x},{y} shows through");
+                // Away from the two kept corner gaps, only near points are around.
+                if (6..w - 6).contains(&x) && (6..h - 6).contains(&y) {
+                    assert_eq!(c.image()[i], Vec3::X, "{x},{y} filled from the near surface");
+                }
+            } else if !inside(x, y) || (x + y) % 2 == 0 {
+                assert_ne!(p, NO_POINT, "point at {x},{y} culled");
+            }
+        }
+    }
+    // Interior gaps plus the border gaps that have near points on two opposite sides (all\n    // but the two corner gaps).
+    assert_eq!(counts.occluded, (w - 8) * (h - 8) / 2 - 2);
+}
+
+#[test]
+fn points_on_a_slanted_plane_are_kept() {
+    let mut rng = Rng(21);
+    for tilt_deg in [0.0f32, 45.0, 70.0, 80.0, 85.0] {
+        let (w, h) = (40u32, 30u32);
+        let cam = camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, w, h);
+        // Plane through the origin, normal tilted away from the view direction about Y.
+        let n = Vec3::new(tilt_deg.to_radians().sin(), 0.0, tilt_deg.to_radians().cos());
+        let mut c = cache(w, h, 1.0);
+        for y in 0..h {
+            for x in 0..w {
+                let (o, d) = cam.ray(x as f32 + rng.f(), y as f32 + rng.f());
+                let t = -n.dot(o) / n.dot(d);
+                if t > 0.0 {
+                    c.insert(&at(hit(o + d * t, rng.color(), 0), x, y));
+                }
+            }
+        }
+        let counts = frame(&mut c, &cam);
+        // Only where the plane meets its horizon (a neighbour pixel sees no plane), whose
+        // depth grows without bound, may the local test take a point for occluded.
+        let (w, h) = (w as i64, h as i64);
+        let mut at_horizon = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                if c.zbufs[0][i] == EMPTY_KEY || c.point_image().point[i] != NO_POINT {
+                    continue;
+                }
+                let beside_empty = (-1..=1i64).any(|dy| {
+                    (-1..=1i64).any(|dx| {
+                        let (nx, ny) = (x + dx, y + dy);
+                        nx >= 0 && ny >= 0 && nx < w && ny < h && c.zbufs[0][(ny * w + nx) as usize] == EMPTY_KEY
+                    })
+                });
+                assert!(beside_empty, "tilt {tilt_deg}: plane point at {x},{y} culled");
+                at_horizon += 1;
+            }
+        }
+        assert!(at_horizon <= h / 5, "tilt {tilt_deg}: {at_horizon} horizon points culled");
+        assert_eq!(counts.occluded as i64, at_horizon);
+        assert_eq!((counts.with_point + counts.occluded) as usize, c.len(), "tilt {tilt_deg}");
+    }
+}
+
+#[test]
+fn interpolation_uses_5x5_when_3x3_is_empty_and_background_beyond() {
+    let (w, h) = (9u32, 9u32);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let grid = plane_points(&cam, 3.0);
+    let mut c = cache(w, h, 1.0);
+    let col = Vec3::new(0.9, 0.5, 0.1);
+    c.insert(&hit(grid[4 * 9 + 4], col, 0)); // the centre pixel only
+    let counts = frame(&mut c, &cam);
+    assert_eq!(counts.with_point, 1);
+    assert_eq!(counts.filled, 24, "the 5x5 around the point");
+    assert_eq!(counts.empty, 81 - 25);
+    let wts = c.filter_weights();
+    for y in 0..9i32 {
+        for x in 0..9i32 {
+            let i = (y * 9 + x) as usize;
+            let r = (x - 4).abs().max((y - 4).abs());
+            if r <= 2 {
+                assert!((c.image()[i] - col).abs().max_element() < 1e-6);
+                let want = (-(((x - 4) * (x - 4) + (y - 4) * (y - 4)) as f32) / (2.0 * INTERP_SIGMA * INTERP_SIGMA)).exp();
+                assert!((wts[i] - want).abs() < 0.02 * want.max(0.01), "weight at {x},{y}: {} vs {want}", wts[i]);
+            } else {
+                assert_eq!(c.image()[i], c.config().background);
+                assert_eq!(wts[i], 0.0);
+            }
+        }
+    }
+    // Weights fall with distance: the sampler's priority rises away from the point.
+    assert!(wts[4 * 9 + 5] > wts[4 * 9 + 6] && wts[4 * 9 + 6] > 0.0);
+}
+
+#[test]
+fn insert_replaces_invalid_then_occluded_then_oldest() {
+    let (w, h) = (4u32, 4u32);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let grid = plane_points(&cam, 3.0);
+    let mut c = cache(w, h, 1.0);
+    assert_eq!(c.capacity(), 16);
+    // 12 front points (pixels 0..12), 4 points behind pixels 0..4 (slots 12..16).
+    for (i, p) in grid.iter().take(12).enumerate() {
+        assert!(c.insert(&hit(*p, Vec3::splat(0.5), i as u32)));
+    }
+    for (i, p) in grid.iter().take(4).enumerate() {
+        let far = cam.eye + (*p - cam.eye) * 2.0;
+        assert!(c.insert(&hit(far, Vec3::ONE, 100 + i as u32)));
+    }
+    assert_eq!(c.len(), 16);
+    frame(&mut c, &cam);
+    // Invalid first: free two slots (objects 5 and 7 are in slots 5 and 7).
+    c.invalidate_objects(&[5, 7]);
+    assert_eq!(c.len(), 14);
+    let mut tag = 1000;
+    let mut insert_where = |c: &mut RenderCache| -> u32 {
+        tag += 1;
+        assert!(c.insert(&hit(Vec3::new(0.0, 0.0, -50.0), Vec3::ZERO, tag)));
+        (0..16).find(|&i| c.point(i).map(|p| p.object) == Some(tag)).unwrap()
+    };
+    assert_eq!([insert_where(&mut c), insert_where(&mut c)], [5, 7]);
+    // Then the four hidden points, in slot order.
+    for want in 12..16 {
+        assert_eq!(insert_where(&mut c), want);
+    }
+    // Then the oldest in insertion order: the original slots 0..12 except the re-used 5 and
+    // 7, then the re-used slots in the order they were re-used (free slots go lowest first:
+    // 5, then 7), then the former hidden slots.
+    for want in [0, 1, 2, 3, 4, 6, 8, 9, 10, 11, 5, 7, 12, 13, 14, 15, 0] {
+        assert_eq!(insert_where(&mut c), want);
+    }
+    assert_eq!(c.len(), 16);
+}
+
+#[test]
+fn invalidate_objects_removes_exactly_those_points() {
+    let mut rng = Rng(3);
+    for _ in 0..5 {
+        let mut c = cache(16, 16, 2.0);
+        let n = (rng.next() % 600) as usize;
+        for _ in 0..n {
+            let obj = (rng.next() % 10) as u32;
+            if obj == 9 {
+                c.insert(&at(miss(rng.vec(-1.0, 1.0), rng.color()), 0, (rng.next() % 16) as u32));
+            } else {
+                c.insert(&at(hit(rng.vec(-1.0, 1.0), rng.color(), obj), 0, (rng.next() % 16) as u32));
+            }
+        }
+        let before: Vec<Option<CachedPoint>> = (0..c.capacity() as u32).map(|i| c.point(i)).collect();
+        let drop: Vec<u32> = (0..10).filter(|_| rng.next() % 3 == 0).collect();
+        c.invalidate_objects(&drop);
+        let mut kept = 0;
+        for (i, b) in before.iter().enumerate() {
+            let after = c.point(i as u32);
+            match b {
+                Some(p) if drop.contains(&p.object) => assert!(after.is_none()),
+                Some(p) => {
+                    assert_eq!(after.as_ref(), Some(p));
+                    kept += 1;
+                }
+                None => assert!(after.is_none()),
+            }
+        }
+        assert_eq!(c.len(), kept);
+    }
+}
+
+#[test]
+fn bad_samples_are_rejected_and_stale_points_get_max_age() {
+    let mut c = cache(8, 8, 1.0);
+    assert!(!c.insert(&hit(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::ONE, 0)));
+    assert!(!c.insert(&hit(Vec3::ZERO, Vec3::new(0.0, f32::INFINITY, 0.0), 0)));
+    assert!(!c.insert(&miss(Vec3::ZERO, Vec3::ONE)));
+    assert_eq!(c.len(), 0);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 8, 8);
+    for p in plane_points(&cam, 2.0) {
+        assert!(c.insert(&hit(p, Vec3::ONE, 0)));
+    }
+    frame(&mut c, &cam);
+    frame(&mut c, &cam);
+    assert!(c.point_image().age.iter().all(|&a| a == 2.0));
+    c.mark_stale();
+    frame(&mut c, &cam);
+    assert!(c.point_image().age.iter().all(|&a| a == STALE_AGE));
+    assert_eq!(c.point_image().point.iter().filter(|&&p| p != NO_POINT).count(), 64, "stale points stay visible");
+    let empty = RenderCache::new(CacheConfig::new(0, 0));
+    assert_eq!(empty.capacity(), 0);
+    let mut empty = empty;
+    assert!(!empty.insert(&hit(Vec3::ZERO, Vec3::ONE, 0)));
+    assert_eq!(frame(&mut empty, &cam), FrameCounts::default());
+}
+
+#[test]
+fn moving_camera_keeps_points_where_they_project() {
+    // After a camera move, every kept point sits in the pixel its world position projects to.
+    let mut rng = Rng(17);
+    let (w, h) = (48u32, 36u32);
+    let mut c = cache(w, h, 2.0);
+    let cam0 = camera(Vec3::new(0.5, 0.8, 5.0), Vec3::ZERO, w, h);
+    one_sample_per_pixel(&mut c, &cam0, &mut rng);
+    let cam1 = Camera { eye: Vec3::new(0.5, 0.8, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 }
+        .orbit(Vec3::ZERO, 0.15)
+        .frame(w, h);
+    let counts = frame(&mut c, &cam1);
+    assert!(counts.with_point > w * h / 2);
+    let pi = c.point_image();
+    for (i, &p) in pi.point.iter().enumerate() {
+        if p == NO_POINT {
+            continue;
+        }
+        let cp = c.point(p).unwrap();
+        let (pix, _) = oracle_project(&cam1, &cp).unwrap();
+        assert_eq!(pix, i);
+    }
+}
+
+#[test]
+fn samples_stay_in_the_pool_region_of_their_row_band() {
+    let (w, h) = (10u32, 30u32); // bands of rows 0-7, 8-15, 16-23, 24-29
+    let mut c = cache(w, h, 1.5);
+    let mut rng = Rng(8);
+    assert_eq!(c.regions.len(), 4);
+    assert_eq!(c.regions[0].start, 0);
+    assert_eq!(c.regions.last().unwrap().end as usize, c.capacity());
+    for r in c.regions.windows(2) {
+        assert_eq!(r[0].end, r[1].start);
+    }
+    // Sizes follow the bands' pixel counts.
+    assert_eq!(c.regions[1].end - c.regions[1].start, 120);
+    assert_eq!(c.regions[3].end - c.regions[3].start, 90);
+    // Over-fill: every insert lands in its band's region, the other regions keep their points.
+    for k in 0..2000u32 {
+        let y = (rng.next() % (h as u64 + 5)) as u32; // rows past the end count as the last
+        let tag = 10_000 + k;
+        assert!(c.insert(&at(hit(rng.vec(-1.0, 1.0), rng.color(), tag), 3, y)));
+        let slot = (0..c.capacity() as u32).find(|&i| c.point(i).map(|p| p.object) == Some(tag)).unwrap();
+        let band = (y / BAND_ROWS).min(3) as usize;
+        let r = &c.regions[band];
+        assert!((r.start..r.end).contains(&slot), "row {y} went to slot {slot}");
+    }
+    assert_eq!(c.len(), c.capacity());
+}

@@ -1,0 +1,175 @@
+//! Tests of prioritized sampling on random priority images.
+use super::*;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(1);
+        mix64(self.0)
+    }
+    fn f(&mut self) -> f32 {
+        unit(self.next())
+    }
+}
+
+fn check_picks(out: &[PixelRequest], w: u32, h: u32, budget: usize) {
+    assert!(out.len() <= budget.min((w * h) as usize), "{} picks for budget {budget}", out.len());
+    let mut seen = vec![false; (w * h) as usize];
+    for r in out {
+        assert!(r.x < w && r.y < h);
+        let i = (r.y * w + r.x) as usize;
+        assert!(!seen[i], "pixel {},{} picked twice", r.x, r.y);
+        seen[i] = true;
+        assert!(r.sx >= r.x as f32 && r.sx < (r.x + 1) as f32, "sx {} outside pixel {}", r.sx, r.x);
+        assert!(r.sy >= r.y as f32 && r.sy < (r.y + 1) as f32, "sy {} outside pixel {}", r.sy, r.y);
+    }
+}
+
+#[test]
+fn picks_are_distinct_inside_their_pixels_and_within_budget() {
+    let mut rng = Rng(1);
+    let cfg = SamplingConfig::default();
+    let mut out = Vec::new();
+    for case in 0..30 {
+        let (w, h) = (1 + (rng.next() % 90) as u32, 1 + (rng.next() % 70) as u32);
+        let n = (w * h) as usize;
+        let mut s = Sampler::new(w, h, case);
+        let weights: Vec<f32> = (0..n).map(|_| if rng.next() % 4 == 0 { 0.0 } else { rng.f() * 3.0 }).collect();
+        let ages: Vec<f32> =
+            (0..n).map(|_| if rng.next() % 3 == 0 { f32::INFINITY } else { (rng.next() % 200) as f32 }).collect();
+        for budget in [0, 1, n / 64 + 1, n / 5, n, n + 17] {
+            s.select(&weights, &ages, &cfg, budget, &mut out);
+            check_picks(&out, w, h, budget);
+            let want = budget.min(n);
+            if want == n {
+                assert_eq!(out.len(), n, "case {case}: a budget covering the image picks every pixel");
+            } else {
+                // Error diffusion loses at most the error pushed over the image border.
+                let slack = 2 + (w + h) as usize / 2;
+                assert!(out.len() + slack >= want, "case {case}: {} picks for budget {want}", out.len());
+            }
+        }
+    }
+}
+
+#[test]
+fn jitter_stays_inside_large_coordinates() {
+    // Near x = 16383, x + u rounds to x + 1 for u close to 1 unless clamped.
+    for x in [0u32, 1, 1000, 16383, 1 << 20] {
+        for u in [0.0f32, 0.5, 0.999_999_9, 1.0 - f32::EPSILON / 2.0] {
+            let v = inside_pixel(x, u);
+            assert!(v >= x as f32 && v < (x as f32 + 1.0) || (x >= 1 << 20 && v == x as f32), "x {x} u {u} -> {v}");
+        }
+    }
+}
+
+#[test]
+fn sampling_concentrates_on_low_weight_pixels() {
+    let (w, h) = (128u32, 96u32);
+    let n = (w * h) as usize;
+    let cfg = SamplingConfig::default();
+    let mut s = Sampler::new(w, h, 42);
+    // Left half: filled pixels (no point) in 24-row bands of weight 0, 1, 2, 3; right half:
+    // fresh points.
+    let band = |i: usize| (i / w as usize) / 24;
+    let weights: Vec<f32> = (0..n).map(|i| if (i as u32 % w) < w / 2 { band(i) as f32 } else { 1.5 }).collect();
+    let ages: Vec<f32> = (0..n).map(|i| if (i as u32 % w) < w / 2 { f32::INFINITY } else { 0.0 }).collect();
+    let budget = n / 64;
+    let mut out = Vec::new();
+    let mut by_weight = [0usize; 4];
+    let mut right = 0usize;
+    let mut total = 0usize;
+    for _ in 0..20 {
+        s.select(&weights, &ages, &cfg, budget, &mut out);
+        check_picks(&out, w, h, budget);
+        for r in &out {
+            if r.x < w / 2 {
+                by_weight[(r.y / 24) as usize] += 1;
+            } else {
+                right += 1;
+            }
+        }
+        total += out.len();
+    }
+    // Expected shares follow the priorities 1/(1+w) for w = 0, 1, 2, 3 and 0.02 for the points.
+    let pr = [1.0, 0.5, 1.0 / 3.0, 0.25, PRIORITY_FRESH_POINT as f64];
+    let rows = [1.0, 1.0, 1.0, 1.0, 4.0]; // the right half has as many pixels as the 4 bands
+    let z: f64 = pr.iter().zip(&rows).map(|(p, r)| p * r).sum();
+    let got = [by_weight[0], by_weight[1], by_weight[2], by_weight[3], right];
+    for k in 0..5 {
+        let want = pr[k] * rows[k] / z * total as f64;
+        let rel = (got[k] as f64 - want).abs() / want;
+        if k < 4 {
+            assert!(rel < 0.1, "class {k}: {} picks, expected {want:.0}", got[k]);
+        } else {
+            // Error diffusion carries some error from the busy half over the border into the
+            // sparse half (a few picks per frame along the border).
+            assert!(rel < 0.6, "class {k}: {} picks, expected {want:.0}", got[k]);
+        }
+    }
+    assert!(by_weight[0] > 3 * by_weight[3]);
+}
+
+#[test]
+fn older_points_get_more_samples_and_unreached_pixels_most() {
+    assert_eq!(priority(0.0, f32::INFINITY, 120.0), PRIORITY_UNREACHED);
+    assert!(priority(0.5, f32::INFINITY, 120.0) < PRIORITY_UNREACHED);
+    assert!(priority(1.0, 10.0, 120.0) < priority(1.0, 100.0, 120.0));
+    assert_eq!(priority(1.0, 1e9, 120.0), PRIORITY_OLD_POINT);
+    assert_eq!(priority(1.0, 500.0, 120.0), PRIORITY_OLD_POINT);
+    assert!(priority(f32::NAN, 0.0, 120.0).is_finite());
+    assert!(PRIORITY_OLD_POINT < priority(1.0, f32::INFINITY, 120.0));
+}
+
+#[test]
+fn pattern_changes_per_frame_and_is_reproducible() {
+    let (w, h) = (64u32, 64u32);
+    let n = (w * h) as usize;
+    let cfg = SamplingConfig::default();
+    let weights = vec![1.0f32; n];
+    let ages = vec![f32::INFINITY; n];
+    let run = |seed: u64| {
+        let mut s = Sampler::new(w, h, seed);
+        let mut frames = Vec::new();
+        let mut out = Vec::new();
+        for _ in 0..4 {
+            s.select(&weights, &ages, &cfg, n / 64, &mut out);
+            frames.push(out.iter().map(|r| (r.x, r.y)).collect::<Vec<_>>());
+        }
+        frames
+    };
+    let a = run(7);
+    assert_eq!(a, run(7));
+    assert_ne!(a, run(8));
+    for f in 1..4 {
+        let same = a[f].iter().filter(|p| a[0].contains(p)).count();
+        assert!(same * 4 < a[0].len(), "frame {f} repeats {same} of {} picks of frame 0", a[0].len());
+    }
+    // Over many frames equal-priority pixels are covered evenly: 256 frames at 1/64 density
+    // pick each pixel 4 times on average; no more pixels are left out than independent
+    // frames would leave (e^-4 = 1.8%), none is picked hugely more often.
+    let mut s = Sampler::new(w, h, 3);
+    let mut out = Vec::new();
+    let mut hits = vec![0u32; n];
+    for _ in 0..256 {
+        s.select(&weights, &ages, &cfg, n / 64, &mut out);
+        for r in &out {
+            hits[(r.y * w + r.x) as usize] += 1;
+        }
+    }
+    let zero = hits.iter().filter(|&&c| c == 0).count();
+    let max = *hits.iter().max().unwrap();
+    assert!(zero * 100 < n * 3, "{zero} pixels never sampled");
+    assert!(max <= 16, "a pixel was sampled {max} times (mean 4)");
+}
+
+#[test]
+fn budget_from_sparseness() {
+    let c = SamplingConfig { sparseness: 64.0, max_age_frames: 120.0 };
+    assert_eq!(c.budget(512 * 512), 4096);
+    assert_eq!(c.budget(10), 1);
+    assert_eq!(c.budget(0), 0);
+    assert_eq!(SamplingConfig { sparseness: f64::NAN, ..c }.budget(100), 100);
+    assert_eq!(SamplingConfig { sparseness: 0.5, ..c }.budget(100), 100);
+}
+

@@ -1,0 +1,390 @@
+//! The frame loop of one session, on its own thread (DESIGN.md "One frame in the renderer"
+//! and "Threads"). It never awaits the network: inputs arrive on a channel, samples are
+//! drained from the dispatcher at the start of the frame, requests leave through the
+//! dispatcher's queue, and frames go out latest-frame-wins.
+//!
+//! Per frame: apply input (camera, object moves bumping the scene epoch, settings) → insert
+//! the samples that arrived (dropping samples of objects that moved after the sample's
+//! epoch) → Render Cache reprojection and interpolation (§4.3) → prioritized sampling of the
+//! frame's budget (§5.3) → ray requests → encode and publish → sleep to the fps cap.
+use super::feedback::ShadingFeedback;
+use super::output::SessionOutput;
+use super::requests::{build_batches, splitmix64, BatchSpec, RequestRing};
+use super::settings::{camera_from_wire, resolve_move, SessionSettings};
+use super::{Input, SessionParams};
+use crate::encode::{effective_encoding, encode_frame};
+use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
+use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
+use crate::stage_times::StageTimes;
+use crate::workers::Dispatcher;
+use edgepoint_proto as pb;
+use edgepoint_scene::camera::CameraFrame;
+use edgepoint_scene::{Camera, Scene};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tonic::Code;
+
+/// Frames' worth of requests that may be outstanding at once: enough to cover worker latency,
+/// few enough that requests are not shaded for a view long gone (back-pressure).
+pub const OUTSTANDING_FRAMES: usize = 4;
+/// How often a waiting loop checks whether the viewer is gone.
+const POLL: Duration = Duration::from_millis(50);
+
+/// Running totals of one session, logged when it ends.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct SessionCounters {
+    pub frames: u64,
+    pub samples_inserted: u64,
+    pub samples_requested: u64,
+    /// Samples of an object that moved after the sample's epoch (or misses from before the
+    /// last move), never shown.
+    pub stale_dropped: u64,
+    /// Answers whose request the session no longer remembers, or with an unknown object.
+    pub unmatched: u64,
+    /// Samples with non-finite values (not inserted).
+    pub nonfinite: u64,
+    /// Batches the dispatcher refused (queue full).
+    pub refused_batches: u64,
+}
+
+pub(super) struct FrameLoop {
+    scene: Arc<Scene>,
+    names: Vec<String>,
+    width: u32,
+    height: u32,
+    shader: String,
+    shader_params: std::collections::HashMap<String, f64>,
+    encoding: pb::FrameEncoding,
+    camera: Camera,
+    cam_frame: CameraFrame,
+    settings: SessionSettings,
+    epoch: u64,
+    /// Per object: the epoch of its latest move (0 = never moved).
+    moved_at: Vec<u64>,
+    last_move_epoch: u64,
+    cache: RenderCache,
+    sampler: Sampler,
+    dispatcher: Dispatcher,
+    ring: RequestRing,
+    pub feedback: ShadingFeedback,
+    times: StageTimes,
+    answers: Vec<pb::SampleBatch>,
+    picks: Vec<PixelRequest>,
+    batches: Vec<pb::RequestBatch>,
+    next_batch_id: u64,
+    seed: u64,
+    sequence: u64,
+    start: Instant,
+    out: Arc<SessionOutput>,
+    inputs: flume::Receiver<Input>,
+    inputs_open: bool,
+    pending: Vec<Input>,
+    pub counters: SessionCounters,
+}
+
+impl FrameLoop {
+    pub(super) fn new(p: SessionParams, dispatcher: Dispatcher, inputs: flume::Receiver<Input>, out: Arc<SessionOutput>) -> Self {
+        let pixels = p.width as usize * p.height as usize;
+        let cache = RenderCache::new(CacheConfig {
+            width: p.width,
+            height: p.height,
+            points_per_pixel: p.points_per_pixel,
+            background: p.scene.background,
+        });
+        let settings = p.settings;
+        let ring = RequestRing::new(ring_capacity(&settings, pixels));
+        let objects = p.scene.objects.len();
+        FrameLoop {
+            names: p.scene.objects.iter().map(|o| o.name.clone()).collect(),
+            width: p.width,
+            height: p.height,
+            shader: p.shader,
+            shader_params: p.shader_params,
+            encoding: effective_encoding(p.encoding),
+            cam_frame: p.camera.frame(p.width, p.height),
+            camera: p.camera,
+            settings,
+            epoch: 0,
+            moved_at: vec![0; objects],
+            last_move_epoch: 0,
+            cache,
+            sampler: Sampler::new(p.width, p.height, p.seed),
+            dispatcher,
+            ring,
+            feedback: ShadingFeedback::new(objects),
+            times: StageTimes::new(),
+            answers: Vec::new(),
+            picks: Vec::new(),
+            batches: Vec::new(),
+            next_batch_id: 0,
+            seed: splitmix64(p.seed ^ 0x5eed),
+            sequence: 0,
+            start: Instant::now(),
+            out,
+            inputs,
+            inputs_open: true,
+            pending: Vec::new(),
+            counters: SessionCounters::default(),
+            scene: p.scene,
+        }
+    }
+
+    /// Runs until the viewer is gone.
+    pub(super) fn run(&mut self) {
+        while !self.out.is_closed() {
+            let t0 = Instant::now();
+            self.times.clear();
+            let t = Instant::now();
+            self.apply_inputs();
+            self.times.add("input", ms_since(t));
+            if self.settings.paused {
+                // Keep taking samples (they stay valid and free the workers' answers) but
+                // make no frames and request nothing.
+                self.insert_samples();
+                self.wait_inputs(t0 + POLL);
+                continue;
+            }
+            self.frame(t0);
+            let period = Duration::from_secs_f64(1.0 / self.settings.max_fps);
+            self.wait_inputs(t0 + period);
+        }
+    }
+
+    fn frame(&mut self, t0: Instant) {
+        let t = Instant::now();
+        let samples_used = self.insert_samples();
+        self.times.add("samples", ms_since(t));
+
+        let counts = self.cache.reproject_and_interpolate(&self.cam_frame, &mut self.times);
+
+        let t = Instant::now();
+        let pixels = self.width as usize * self.height as usize;
+        let per_frame = self.settings.frame_budget(pixels);
+        let max_outstanding = per_frame * OUTSTANDING_FRAMES;
+        let outstanding = self.dispatcher.outstanding_requests() as usize;
+        let budget = per_frame.min(max_outstanding.saturating_sub(outstanding));
+        let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
+        self.picks.clear();
+        if budget > 0 {
+            let ages = &self.cache.point_image().age;
+            self.sampler.select(self.cache.filter_weights(), ages, &cfg, budget, &mut self.picks);
+        }
+        self.times.add("sampling", ms_since(t));
+
+        let t = Instant::now();
+        let samples_requested = self.send_requests();
+        self.times.add("requests", ms_since(t));
+
+        let t = Instant::now();
+        let data = match encode_frame(self.cache.image(), self.width, self.height, self.encoding) {
+            Ok(d) => d,
+            Err(e) => {
+                tracing::error!("frame {} not sent: {e}", self.sequence);
+                return;
+            }
+        };
+        self.times.add("encode", ms_since(t));
+        self.publish(t0, data, counts, samples_used, samples_requested);
+    }
+
+    fn publish(&mut self, t0: Instant, data: Vec<u8>, counts: FrameCounts, samples_used: u32, samples_requested: u32) {
+        self.sequence += 1;
+        self.counters.frames += 1;
+        let frame = pb::Frame {
+            sequence: self.sequence,
+            width: self.width,
+            height: self.height,
+            encoding: self.encoding as i32,
+            data,
+            stages: self.times.stages.iter().map(|&(stage, ms)| pb::StageTime { stage: stage.to_string(), ms }).collect(),
+            total_ms: ms_since(t0),
+            samples_used,
+            samples_requested,
+            outstanding: self.dispatcher.outstanding_requests().min(u32::MAX as u64) as u32,
+            pixels: Some(pb::PixelCounts {
+                with_point: counts.with_point,
+                filled: counts.filled,
+                empty: counts.empty,
+                occluded: counts.occluded,
+                cache_points: counts.cache_points,
+                ..Default::default()
+            }),
+            epoch: self.epoch,
+            live_workers: self.dispatcher.live_workers() as u32,
+            frames_dropped: self.out.frames_dropped(),
+            sim_time: self.start.elapsed().as_secs_f64(),
+        };
+        self.out.publish_frame(frame);
+    }
+
+    /// Applies every input received so far, in order. Bad ones are answered with a
+    /// `Rejected` and change nothing.
+    fn apply_inputs(&mut self) {
+        if self.inputs_open {
+            loop {
+                match self.inputs.try_recv() {
+                    Ok(i) => self.pending.push(i),
+                    Err(flume::TryRecvError::Empty) => break,
+                    Err(flume::TryRecvError::Disconnected) => {
+                        self.inputs_open = false;
+                        break;
+                    }
+                }
+            }
+        }
+        let pending = std::mem::take(&mut self.pending);
+        for input in &pending {
+            match input {
+                Input::Camera(c) => match camera_from_wire(c) {
+                    Ok(cam) => {
+                        self.camera = cam;
+                        self.cam_frame = cam.frame(self.width, self.height);
+                    }
+                    Err(e) => self.out.reject(Code::InvalidArgument, format!("camera ignored: {e}")),
+                },
+                Input::Move(m) => match resolve_move(m, &self.names) {
+                    Ok((id, t)) => self.move_object(id, t),
+                    Err(e) => self.out.reject(Code::InvalidArgument, format!("object move ignored: {e}")),
+                },
+                Input::Settings(s) => match self.settings.with(s) {
+                    Ok(new) => {
+                        self.settings = new;
+                        let pixels = self.width as usize * self.height as usize;
+                        self.ring.reserve(ring_capacity(&new, pixels));
+                    }
+                    Err(e) => self.out.reject(Code::InvalidArgument, format!("settings ignored: {e}")),
+                },
+            }
+        }
+        // Hand the (now empty) buffer back so its capacity is reused.
+        self.pending = pending;
+        self.pending.clear();
+    }
+
+    fn move_object(&mut self, id: u32, t: glam::Affine3A) {
+        self.epoch += 1;
+        if !self.dispatcher.set_epoch(self.epoch, vec![(id, t)]) {
+            // The session is the dispatcher's only writer, so epochs always increase.
+            tracing::error!(epoch = self.epoch, "dispatcher refused a new epoch");
+        }
+        self.moved_at[id as usize] = self.epoch;
+        self.last_move_epoch = self.epoch;
+        self.cache.invalidate_objects(&[id]);
+        // Shadows and reflections on other objects may have changed too: age everything so
+        // it is re-sampled soon (DESIGN.md step 1, conservatively).
+        self.cache.mark_stale();
+    }
+
+    /// Drains answers from the workers into the cache; returns samples inserted.
+    fn insert_samples(&mut self) -> u32 {
+        self.answers.clear();
+        self.dispatcher.drain(&mut self.answers);
+        let mut inserted = 0u32;
+        let objects = self.moved_at.len() as u32;
+        let lights = self.scene.lights.len();
+        for b in &self.answers {
+            self.feedback.record(b, lights);
+            for s in &b.samples {
+                let Some(info) = self.ring.get(s.id) else {
+                    self.counters.unmatched += 1;
+                    continue;
+                };
+                let (position, object) = if s.hit {
+                    if s.object_id >= objects {
+                        self.counters.unmatched += 1;
+                        continue;
+                    }
+                    // A sample of an object that has moved since it was requested shows the
+                    // object where it no longer is: never show it.
+                    if self.moved_at[s.object_id as usize] > b.epoch {
+                        self.counters.stale_dropped += 1;
+                        continue;
+                    }
+                    (pb::vec3_or_zero(&s.position), s.object_id)
+                } else {
+                    // A miss from before the last move may now be blocked by the moved object.
+                    if b.epoch < self.last_move_epoch {
+                        self.counters.stale_dropped += 1;
+                        continue;
+                    }
+                    (info.dir, u32::MAX)
+                };
+                let sample = Sample {
+                    hit: s.hit,
+                    position,
+                    normal: pb::vec3_or_zero(&s.normal),
+                    color: pb::vec3_or_zero(&s.rgb),
+                    object,
+                    epoch: b.epoch,
+                    pixel: info.pixel,
+                };
+                if !(sample.position.is_finite() && sample.normal.is_finite() && sample.color.is_finite()) {
+                    self.counters.nonfinite += 1;
+                    continue;
+                }
+                if self.cache.insert(&sample) {
+                    inserted += 1;
+                }
+            }
+        }
+        self.counters.samples_inserted += inserted as u64;
+        inserted
+    }
+
+    /// Builds ray batches for the picked pixels and submits them; returns requests sent.
+    fn send_requests(&mut self) -> u32 {
+        self.batches.clear();
+        let spec = BatchSpec {
+            epoch: self.epoch,
+            shader: &self.shader,
+            params: &self.shader_params,
+            batch_size: self.settings.batch_size as usize,
+        };
+        build_batches(&self.picks, &self.cam_frame, &mut self.ring, &spec, &mut self.next_batch_id, &mut self.seed, &mut self.batches);
+        let mut sent = 0u32;
+        for b in self.batches.drain(..) {
+            let n = b.requests.len() as u32;
+            if self.dispatcher.submit(b) {
+                sent += n;
+            } else {
+                // Queue full: the rest waits for the next frame's (re-prioritised) selection.
+                self.counters.refused_batches += 1;
+                break;
+            }
+        }
+        self.counters.samples_requested += sent as u64;
+        sent
+    }
+
+    /// Sleeps until `deadline`, collecting inputs; returns early only when the viewer is gone.
+    fn wait_inputs(&mut self, deadline: Instant) {
+        loop {
+            if self.out.is_closed() {
+                return;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return;
+            }
+            let step = deadline.min(now + POLL);
+            if self.inputs_open {
+                match self.inputs.recv_deadline(step) {
+                    Ok(i) => self.pending.push(i),
+                    Err(flume::RecvTimeoutError::Timeout) => {}
+                    Err(flume::RecvTimeoutError::Disconnected) => self.inputs_open = false,
+                }
+            } else {
+                std::thread::sleep(step - now);
+            }
+        }
+    }
+}
+
+/// Ring size: all requests that can be outstanding, twice over, so late answers still match.
+fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
+    2 * (s.frame_budget(pixels) * OUTSTANDING_FRAMES + s.batch_size as usize)
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

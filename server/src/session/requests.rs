@@ -1,0 +1,192 @@
+//! Outgoing sample requests and the bookkeeping that turns answers back into Render Cache
+//! points (paper 000 §4.3: "the shader computes the color and first point of intersection
+//! for a viewing ray").
+//!
+//! A worker answers a request with its id only, yet the cache needs the pixel the sample was
+//! shaded for and, for a ray that hit nothing, the ray direction (a miss is a point at
+//! infinity). Both are remembered in a ring indexed by request id: no hashing, no
+//! allocation per request, and an answer whose slot was reused (it came back very late)
+//! is recognised by its id and ignored.
+use crate::sampling::PixelRequest;
+use edgepoint_proto as pb;
+use edgepoint_scene::camera::CameraFrame;
+use glam::Vec3;
+
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    id: u64,
+    pixel: [u32; 2],
+    dir: Vec3,
+}
+
+const EMPTY: Slot = Slot { id: u64::MAX, pixel: [0, 0], dir: Vec3::ZERO };
+
+/// What the session remembers of one request.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RequestInfo {
+    pub pixel: [u32; 2],
+    pub dir: Vec3,
+}
+
+/// Request ids to (pixel, direction), for the most recent `capacity` requests.
+pub struct RequestRing {
+    slots: Vec<Slot>,
+    mask: u64,
+    next_id: u64,
+}
+
+impl RequestRing {
+    /// A ring remembering at least `min_capacity` requests.
+    pub fn new(min_capacity: usize) -> Self {
+        let cap = min_capacity.max(64).next_power_of_two();
+        RequestRing { slots: vec![EMPTY; cap], mask: cap as u64 - 1, next_id: 0 }
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Grows the ring (keeping what it remembers) so it holds at least `min_capacity`.
+    pub fn reserve(&mut self, min_capacity: usize) {
+        if min_capacity <= self.slots.len() {
+            return;
+        }
+        let mut bigger = RequestRing::new(min_capacity);
+        bigger.next_id = self.next_id;
+        for s in self.slots.iter().filter(|s| s.id != u64::MAX) {
+            bigger.slots[(s.id & bigger.mask) as usize] = *s;
+        }
+        *self = bigger;
+    }
+
+    /// Records a request; returns its id.
+    #[inline]
+    pub fn push(&mut self, pixel: [u32; 2], dir: Vec3) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.slots[(id & self.mask) as usize] = Slot { id, pixel, dir };
+        id
+    }
+
+    /// What request `id` was, unless its slot has been reused since.
+    #[inline]
+    pub fn get(&self, id: u64) -> Option<RequestInfo> {
+        let s = self.slots[(id & self.mask) as usize];
+        (s.id == id).then_some(RequestInfo { pixel: s.pixel, dir: s.dir })
+    }
+}
+
+/// Per-batch constants for request building.
+pub struct BatchSpec<'a> {
+    pub epoch: u64,
+    pub shader: &'a str,
+    pub params: &'a std::collections::HashMap<String, f64>,
+    pub batch_size: usize,
+}
+
+/// Turns the pixels the sampler chose into ray request batches through `cam`, recording
+/// each request in `ring`. `next_batch_id` and `seed` advance per batch.
+pub fn build_batches(
+    picks: &[PixelRequest],
+    cam: &CameraFrame,
+    ring: &mut RequestRing,
+    spec: &BatchSpec<'_>,
+    next_batch_id: &mut u64,
+    seed: &mut u64,
+    out: &mut Vec<pb::RequestBatch>,
+) {
+    for chunk in picks.chunks(spec.batch_size.max(1)) {
+        let requests = chunk
+            .iter()
+            .map(|p| {
+                let (origin, dir) = cam.ray(p.sx, p.sy);
+                let id = ring.push([p.x, p.y], dir);
+                pb::ShadeRequest {
+                    id,
+                    pixel_x: p.x,
+                    pixel_y: p.y,
+                    origin: Some(origin.into()),
+                    direction: Some(dir.into()),
+                }
+            })
+            .collect();
+        *seed = splitmix64(*seed);
+        out.push(pb::RequestBatch {
+            batch_id: *next_batch_id,
+            epoch: spec.epoch,
+            shader: spec.shader.to_string(),
+            params: spec.params.clone(),
+            requests,
+            seed: *seed,
+        });
+        *next_batch_id += 1;
+    }
+}
+
+/// SplitMix64: a tiny, well-mixed generator step for batch seeds.
+#[inline]
+pub fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use edgepoint_scene::Camera;
+
+    #[test]
+    fn ring_remembers_recent_requests_and_forgets_reused_slots() {
+        let mut r = RequestRing::new(100);
+        assert_eq!(r.capacity(), 128);
+        let ids: Vec<u64> = (0..200).map(|i| r.push([i, i + 1], Vec3::new(i as f32, 0.0, 1.0))).collect();
+        assert_eq!(ids, (0..200).collect::<Vec<_>>());
+        for &id in &ids[..72] {
+            assert!(r.get(id).is_none(), "slot of {id} was reused");
+        }
+        for &id in &ids[72..] {
+            let info = r.get(id).unwrap();
+            assert_eq!(info.pixel, [id as u32, id as u32 + 1]);
+            assert_eq!(info.dir.x, id as f32);
+        }
+        assert!(r.get(500).is_none(), "future id");
+        r.reserve(1000);
+        assert_eq!(r.capacity(), 1024);
+        for &id in &ids[72..] {
+            assert_eq!(r.get(id).unwrap().pixel[0], id as u32, "kept across growth");
+        }
+        assert_eq!(r.push([0, 0], Vec3::Z), 200);
+    }
+
+    #[test]
+    fn batches_carry_rays_through_the_picked_positions() {
+        let cam = Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 };
+        let f = cam.frame(32, 16);
+        let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: i % 16, sx: i as f32 + 0.25, sy: (i % 16) as f32 + 0.75 }).collect();
+        let mut ring = RequestRing::new(64);
+        let params = std::collections::HashMap::from([("ambient".to_string(), 0.1)]);
+        let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4 };
+        let (mut next, mut seed, mut out) = (7u64, 1u64, Vec::new());
+        build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
+        assert_eq!(out.iter().map(|b| b.requests.len()).collect::<Vec<_>>(), vec![4, 4, 2]);
+        assert_eq!(out.iter().map(|b| b.batch_id).collect::<Vec<_>>(), vec![7, 8, 9]);
+        assert_eq!(next, 10);
+        assert!(out[0].seed != out[1].seed);
+        for b in &out {
+            assert_eq!((b.epoch, b.shader.as_str(), b.params.get("ambient")), (3, "direct", Some(&0.1)));
+            for r in &b.requests {
+                let info = ring.get(r.id).unwrap();
+                assert_eq!(info.pixel, [r.pixel_x, r.pixel_y]);
+                let d: Vec3 = r.direction.unwrap().into();
+                let o: Vec3 = r.origin.unwrap().into();
+                // The ray projects back onto the jittered position it was built for.
+                let p = picks.iter().find(|p| p.x == r.pixel_x).unwrap();
+                let (sx, sy, _) = f.project(o + d * 2.0).unwrap();
+                assert!((sx - p.sx).abs() < 1e-3 && (sy - p.sy).abs() < 1e-3);
+                assert!((info.dir - d).length() < 1e-6);
+            }
+        }
+    }
+}

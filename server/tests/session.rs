@@ -1,0 +1,245 @@
+//! End-to-end sessions in one process: real shader workers and the Renderer service on
+//! 127.0.0.1:0, a viewer over gRPC.
+mod common;
+
+use common::{open, spawn_renderer, start_msg, Worker};
+use edgepoint_proto as pb;
+use edgepoint_proto::viewer_msg::Msg as In;
+use edgepoint_server::encode::decode_frame;
+use glam::{Affine3A, Vec3};
+
+fn cornell() -> pb::SceneSource {
+    pb::builtin_source("cornell")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cornell_session_streams_frames_that_fill_with_samples() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 4).await;
+    let mut v = open(&addr, start_msg(cornell(), 64, 48)).await.unwrap();
+    let st = v.started().await;
+    assert_eq!(st.scene_hash, pb::scene_hash(&cornell()));
+    assert_eq!(st.workers, 1);
+    assert!(st.lights >= 1 && !st.objects.is_empty());
+    for (i, o) in st.objects.iter().enumerate() {
+        assert_eq!(o.id as usize, i);
+        assert!(o.triangles > 0 && !o.name.is_empty() && o.transform.is_some());
+    }
+    assert!(st.camera.is_some() && !st.session_id.is_empty());
+
+    let (first, _) = v.frame(20).await;
+    let with_samples = v.frame_with_samples(20).await;
+    assert!(with_samples.sequence > first.sequence);
+    let mut last = with_samples.sequence;
+    for _ in 0..5 {
+        let (f, rej) = v.frame(10).await;
+        assert!(rej.is_empty());
+        assert!(f.sequence > last, "sequence increases");
+        last = f.sequence;
+        assert_eq!((f.width, f.height, f.encoding), (64, 48, pb::FrameEncoding::Qoi as i32));
+        let px = decode_frame(&f.data, pb::FrameEncoding::Qoi, 64, 48).unwrap();
+        assert_eq!(px.len(), 64 * 48);
+        assert_eq!(f.stages.last().unwrap().stage, "encode", "stages in pipeline order, encode last");
+        assert!(f.stages.iter().any(|s| s.stage == "sampling"));
+        assert!(f.total_ms >= f.stages.iter().map(|s| s.ms).sum::<f64>() * 0.99);
+        let p = f.pixels.unwrap();
+        assert_eq!(p.with_point + p.filled + p.empty, 64 * 48);
+        assert!(p.cache_points > 0);
+    }
+    // After a few frames of dense sampling most pixels show a real point, and the image is
+    // not just the background.
+    let (f, _) = v.frame(10).await;
+    assert!(f.pixels.unwrap().with_point > 64 * 48 / 4, "{:?}", f.pixels);
+    let px = decode_frame(&f.data, pb::FrameEncoding::Qoi, 64, 48).unwrap();
+    let distinct: std::collections::HashSet<_> = px.iter().collect();
+    assert!(distinct.len() > 10, "a rendered room has many colours, got {}", distinct.len());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_inputs_are_rejected_and_frames_keep_coming() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 4).await;
+    let mut v = open(&addr, start_msg(cornell(), 64, 48)).await.unwrap();
+    let st = v.started().await;
+    let (f0, _) = v.frame(20).await;
+
+    let nan = pb::Camera {
+        eye: Some(Vec3::new(f32::NAN, 0.0, 0.0).into()),
+        target: Some(Vec3::ZERO.into()),
+        up: Some(Vec3::Y.into()),
+        fov_y_degrees: 40.0,
+    };
+    v.send(In::Camera(nan)).await;
+    let mut parallel = st.camera.unwrap();
+    let (e, t): (Vec3, Vec3) = (parallel.eye.unwrap().into(), parallel.target.unwrap().into());
+    parallel.up = Some((t - e).into());
+    v.send(In::Camera(parallel)).await;
+    v.send(In::Move(pb::ObjectMove { object_id: 999, name: String::new(), transform: Some(pb::affine_to_wire(&Affine3A::IDENTITY)) })).await;
+    v.send(In::Settings(pb::Settings { sparseness: -5.0, ..Default::default() })).await;
+
+    let mut rejected = Vec::new();
+    let mut last = f0.sequence;
+    while rejected.len() < 4 {
+        let (f, r) = v.frame(10).await;
+        assert!(f.sequence > last);
+        last = f.sequence;
+        rejected.extend(r);
+    }
+    assert!(rejected.iter().all(|r| r.code == tonic::Code::InvalidArgument as i32));
+    assert!(rejected[0].message.contains("camera") && rejected[0].message.contains("not finite"), "{}", rejected[0].message);
+    assert!(rejected[1].message.contains("parallel"), "{}", rejected[1].message);
+    assert!(rejected[2].message.contains("999"), "{}", rejected[2].message);
+    assert!(rejected[3].message.contains("sparseness"), "{}", rejected[3].message);
+    assert_eq!(rejected.len(), 4);
+
+    // Frames keep coming, samples keep arriving, and the epoch has not moved.
+    let f = v.frame_with_samples(20).await;
+    assert_eq!(f.epoch, 0);
+
+    // A valid move bumps the epoch; the moved object's stale samples never come back.
+    let mut moved = Affine3A::from_translation(Vec3::new(0.05, 0.0, 0.0));
+    let obj = st.objects.last().unwrap();
+    moved = pb::affine_from_wire(obj.transform.as_ref().unwrap()).unwrap() * moved;
+    v.send(In::Move(pb::ObjectMove { object_id: 0, name: obj.name.clone(), transform: Some(pb::affine_to_wire(&moved)) })).await;
+    let mut epoch = 0;
+    for _ in 0..50 {
+        let (f, r) = v.frame(10).await;
+        assert!(r.is_empty(), "{r:?}");
+        epoch = f.epoch;
+        if epoch == 1 {
+            break;
+        }
+    }
+    assert_eq!(epoch, 1);
+    let f = v.frame_with_samples(20).await;
+    assert_eq!(f.epoch, 1);
+    // A valid camera is taken silently.
+    let mut cam = st.camera.unwrap();
+    cam.fov_y_degrees = 50.0;
+    v.send(In::Camera(cam)).await;
+    let (_, r) = v.frame(10).await;
+    let (_, r2) = v.frame(10).await;
+    assert!(r.is_empty() && r2.is_empty());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_starts_fail_alone_while_another_session_runs() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 8).await;
+    let mut good = open(&addr, start_msg(cornell(), 64, 48)).await.unwrap();
+    good.started().await;
+    let (f0, _) = good.frame(20).await;
+
+    let e = open(&addr, start_msg(cornell(), 0, 48)).await.err().expect("zero width refused");
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("width") && e.message().contains('0'), "{}", e.message());
+
+    let broken = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 zero 0\n".to_vec();
+    let e = open(&addr, start_msg(pb::files_source(vec![("broken_mesh.ply".into(), broken)]), 64, 48))
+        .await
+        .err()
+        .expect("malformed PLY refused");
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("broken_mesh.ply"), "names the file: {}", e.message());
+
+    let e = open(&addr, start_msg(pb::builtin_source("no-such-scene"), 64, 48)).await.err().unwrap();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("no-such-scene"), "{}", e.message());
+
+    let cam_first = pb::ViewerMsg { msg: Some(In::Camera(pb::Camera::default())) };
+    let e = open(&addr, cam_first).await.err().unwrap();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("start"), "{}", e.message());
+
+    // The good session never noticed.
+    let mut last = f0.sequence;
+    for _ in 0..3 {
+        let (f, r) = good.frame(10).await;
+        assert!(r.is_empty());
+        assert!(f.sequence > last);
+        last = f.sequence;
+    }
+    good.frame_with_samples(20).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn session_limit_and_missing_workers_are_refused() {
+    let w = Worker::spawn();
+    let (addr, handle) = spawn_renderer(vec![w.url.clone()], 1).await;
+    let mut first = open(&addr, start_msg(cornell(), 32, 24)).await.unwrap();
+    first.started().await;
+    let e = open(&addr, start_msg(cornell(), 32, 24)).await.err().expect("over the limit");
+    assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+    assert!(e.message().contains("max-sessions"), "{}", e.message());
+    assert_eq!(handle.active_sessions(), 1);
+    // Ending the first session frees its slot.
+    drop(first);
+    let mut freed = false;
+    for _ in 0..100 {
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        if handle.active_sessions() == 0 {
+            freed = true;
+            break;
+        }
+    }
+    assert!(freed, "the session slot was released");
+    let mut again = open(&addr, start_msg(cornell(), 32, 24)).await.unwrap();
+    again.started().await;
+
+    let (none, _h2) = spawn_renderer(vec![], 4).await;
+    let e = open(&none, start_msg(cornell(), 32, 24)).await.err().unwrap();
+    assert_eq!(e.code(), tonic::Code::FailedPrecondition);
+
+    // Shutdown ends running sessions and refuses new ones.
+    handle.shutdown();
+    loop {
+        match tokio::time::timeout(std::time::Duration::from_secs(5), again.rx.message()).await.expect("stream ends") {
+            Ok(Some(_)) => continue,
+            Ok(None) | Err(_) => break,
+        }
+    }
+    let e = open(&addr, start_msg(cornell(), 32, 24)).await.err().unwrap();
+    assert_eq!(e.code(), tonic::Code::Unavailable);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_continue_when_a_worker_disappears() {
+    let mut a = Worker::spawn();
+    let b = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![a.url.clone(), b.url.clone()], 4).await;
+    let mut v = open(&addr, start_msg(cornell(), 64, 48)).await.unwrap();
+    v.started().await;
+    let mut live = 0;
+    for _ in 0..200 {
+        let (f, _) = v.frame(10).await;
+        live = f.live_workers;
+        if live == 2 && f.samples_used > 0 {
+            break;
+        }
+    }
+    assert_eq!(live, 2, "both workers connected");
+
+    a.kill();
+    // Frames keep coming, new samples keep arriving from the remaining worker, and the
+    // session notices it has one live worker.
+    let mut saw_one_live = false;
+    let mut samples_after = 0u64;
+    let mut last = 0;
+    for _ in 0..300 {
+        let (f, _) = v.frame(10).await;
+        assert!(f.sequence > last);
+        last = f.sequence;
+        if f.live_workers == 1 {
+            saw_one_live = true;
+        }
+        if saw_one_live {
+            samples_after += f.samples_used as u64;
+            if samples_after > 500 {
+                break;
+            }
+        }
+    }
+    assert!(saw_one_live, "the dead worker's link went down");
+    assert!(samples_after > 500, "samples keep arriving after the worker died ({samples_after})");
+    drop(b);
+}

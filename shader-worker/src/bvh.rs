@@ -1,0 +1,180 @@
+//! Two-level BVH (DESIGN.md "shader-worker"): one obvhs `CwBvh` per object, built once in
+//! OBJECT space, and a small top level over the instances' world boxes, rebuilt per transform
+//! epoch in microseconds. A ray is transformed into each candidate instance's object space by
+//! the inverse affine with its direction NOT renormalised, so `t` stays in world units and
+//! hits from different instances compare directly. Moving an object rebuilds nothing of its
+//! own BVH — the property paper 000 §6.5 relies on for moving objects.
+use edgepoint_scene::{Mesh, Progress};
+use glam::{Affine3A, Mat3A, Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::builder::{build_cwbvh, build_cwbvh_from_tris};
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray, RayHit};
+use obvhs::rt_triangle::RtTriangle;
+use obvhs::triangle::Triangle;
+use obvhs::BvhBuildParams;
+use std::time::Duration;
+
+/// One object's BVH in object space; triangles are stored in BVH leaf order so the traversal
+/// callback indexes them directly.
+pub struct ObjectBvh {
+    bvh: CwBvh,
+    tris: Vec<RtTriangle>,
+    /// BVH primitive slot -> triangle index in the mesh.
+    tri_index: Vec<u32>,
+    /// Unit object-space face normal per BVH slot (mesh winding).
+    normals: Vec<Vec3A>,
+    bounds: (Vec3, Vec3),
+}
+
+impl ObjectBvh {
+    pub fn build(mesh: &Mesh) -> ObjectBvh {
+        let triangles: Vec<Triangle> = (0..mesh.triangles.len())
+            .map(|f| {
+                let [a, b, c] = mesh.triangle(f);
+                Triangle { v0: a.into(), v1: b.into(), v2: c.into() }
+            })
+            .collect();
+        let mut t = Duration::ZERO;
+        let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut t);
+        let tri_index = bvh.primitive_indices.clone();
+        let tris = tri_index.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
+        let normals = tri_index.iter().map(|&i| mesh.face_normals[i as usize].into()).collect();
+        ObjectBvh { bvh, tris, tri_index, normals, bounds: mesh.bounds }
+    }
+}
+
+/// Per-object BVHs of a whole scene (built once per scene).
+pub struct SceneBvh {
+    pub objects: Vec<ObjectBvh>,
+}
+
+impl SceneBvh {
+    pub fn build(meshes: &[&Mesh], progress: &dyn Progress) -> SceneBvh {
+        let total: u64 = meshes.iter().map(|m| m.triangles.len() as u64).sum();
+        progress.begin("BVH build", total);
+        let objects = meshes
+            .iter()
+            .map(|m| {
+                let o = ObjectBvh::build(m);
+                progress.advance(m.triangles.len() as u64);
+                o
+            })
+            .collect();
+        progress.end();
+        SceneBvh { objects }
+    }
+}
+
+/// The top level for one set of object transforms (one epoch).
+pub struct Instances {
+    top: Option<CwBvh>,
+    /// Top-level primitive slot -> object id.
+    slot_object: Vec<u32>,
+    to_object: Vec<Affine3A>,
+    /// Inverse-transpose of each object's linear part: object normals to world normals.
+    normal_to_world: Vec<Mat3A>,
+}
+
+/// A closest hit, in world space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    pub object: u32,
+    pub triangle: u32,
+    /// Distance along the ray in units of the ray direction's length.
+    pub t: f32,
+    pub position: Vec3,
+    /// Unit geometric normal (mesh winding), world space.
+    pub normal: Vec3,
+}
+
+fn world_box(a: &Affine3A, (lo, hi): (Vec3, Vec3)) -> Aabb {
+    let mut b = Aabb::empty();
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        b.extend(a.transform_point3a(c.into()));
+    }
+    b
+}
+
+impl Instances {
+    /// Builds the top level for `transforms` (object-to-world, one per object).
+    pub fn new(bvh: &SceneBvh, transforms: &[Affine3A]) -> Instances {
+        assert_eq!(bvh.objects.len(), transforms.len(), "one transform per object");
+        let boxes: Vec<Aabb> = bvh.objects.iter().zip(transforms).map(|(o, t)| world_box(t, o.bounds)).collect();
+        let (top, slot_object) = if boxes.is_empty() {
+            (None, Vec::new())
+        } else {
+            let mut d = Duration::ZERO;
+            let top = build_cwbvh(&boxes, BvhBuildParams::fast_build(), &mut d);
+            let slots = top.primitive_indices.clone();
+            (Some(top), slots)
+        };
+        Instances {
+            top,
+            slot_object,
+            to_object: transforms.iter().map(|t| t.inverse()).collect(),
+            normal_to_world: transforms.iter().map(|t| t.matrix3.inverse().transpose()).collect(),
+        }
+    }
+
+    /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
+    pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        let top = self.top.as_ref()?;
+        let ray = Ray::new(origin.into(), dir.into(), tmin, tmax);
+        let mut best: Option<(u32, u32)> = None;
+        let mut top_hit = RayHit::none();
+        top.ray_traverse(ray, &mut top_hit, |r, slot| {
+            let obj = self.slot_object[slot];
+            let inv = &self.to_object[obj as usize];
+            let o = &bvh.objects[obj as usize];
+            let local = Ray::new(
+                inv.transform_point3a(r.origin),
+                inv.transform_vector3a(r.direction),
+                r.tmin,
+                r.tmax,
+            );
+            let mut h = RayHit::none();
+            if o.bvh.ray_traverse(local, &mut h, |lr, id| o.tris[id].intersect(lr)) {
+                best = Some((obj, h.primitive_id));
+                h.t
+            } else {
+                f32::INFINITY
+            }
+        });
+        let (object, slot) = best?;
+        let t = top_hit.t;
+        let o = &bvh.objects[object as usize];
+        let normal = (self.normal_to_world[object as usize] * o.normals[slot as usize]).normalize_or_zero();
+        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, normal: normal.into() })
+    }
+
+    /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.
+    pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
+        let top = self.top.as_ref()?;
+        let ray = Ray::new(origin.into(), dir.into(), tmin, tmax);
+        let mut blocker = None;
+        top.ray_traverse_miss(ray, |r, slot| {
+            let obj = self.slot_object[slot];
+            let inv = &self.to_object[obj as usize];
+            let o = &bvh.objects[obj as usize];
+            let local = Ray::new(
+                inv.transform_point3a(r.origin),
+                inv.transform_vector3a(r.direction),
+                r.tmin,
+                r.tmax,
+            );
+            if !o.bvh.ray_traverse_miss(local, |lr, id| o.tris[id].intersect(lr)) {
+                blocker = Some(obj);
+                r.tmin // any value < tmax stops the traversal
+            } else {
+                f32::INFINITY
+            }
+        });
+        blocker
+    }
+}

@@ -1,0 +1,237 @@
+//! Shaders. `direct` (paper 000 §7: "direct illumination with ambient"): point lights with one
+//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows), a
+//! Lambertian BRDF, emission of light fixtures seen from the front, and an ambient term.
+//! Every blocked shadow ray reports a light–blocker–receiver triple (paper 000 §6.5 "Finding
+//! light-blocker-receiver triples"): the renderer's edge finder learns from them which
+//! shadows exist without testing every light–blocker pair.
+use crate::bvh::Instances;
+use crate::loaded::{LoadedScene, PreparedLight};
+use crate::rng::Rng;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::collections::{HashMap, HashSet};
+use std::f32::consts::FRAC_1_PI;
+
+/// Names of the shaders this worker offers.
+pub const SHADERS: &[&str] = &["direct"];
+
+/// A parsed shader with its parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ShaderSpec {
+    Direct(DirectParams),
+}
+
+/// Parameters of the `direct` shader.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectParams {
+    /// Shadow rays per area light per sample (`shadow_rays`, default 16, 1..=4096).
+    pub shadow_rays: u32,
+    /// Scale of the scene's ambient term (`ambient`, default 1, 0..=100).
+    pub ambient: f32,
+}
+
+impl Default for DirectParams {
+    fn default() -> Self {
+        DirectParams { shadow_rays: 16, ambient: 1.0 }
+    }
+}
+
+impl ShaderSpec {
+    /// Parses a shader name ("" means `direct`) and its parameters; unknown names, unknown
+    /// keys and out-of-range values are errors that list what is valid.
+    pub fn parse(name: &str, params: &HashMap<String, f64>) -> Result<ShaderSpec, String> {
+        match name {
+            "" | "direct" => {
+                let mut p = DirectParams::default();
+                for (k, &v) in params {
+                    match k.as_str() {
+                        "shadow_rays" => {
+                            if !(v.is_finite() && v >= 1.0 && v <= 4096.0 && v.fract() == 0.0) {
+                                return Err(format!("shader direct: shadow_rays must be a whole number in 1..=4096, got {v}"));
+                            }
+                            p.shadow_rays = v as u32;
+                        }
+                        "ambient" => {
+                            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                                return Err(format!("shader direct: ambient must be in 0..=100, got {v}"));
+                            }
+                            p.ambient = v as f32;
+                        }
+                        _ => {
+                            return Err(format!(
+                                "shader direct has no parameter '{k}' (parameters: shadow_rays, ambient)"
+                            ))
+                        }
+                    }
+                }
+                Ok(ShaderSpec::Direct(p))
+            }
+            _ => Err(format!("unknown shader '{name}' (shaders: {})", SHADERS.join(", "))),
+        }
+    }
+}
+
+/// One ray to shade.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayRequest {
+    pub id: u64,
+    pub pixel: [u32; 2],
+    pub origin: Vec3,
+    /// Need not be normalised; must be finite and non-zero.
+    pub direction: Vec3,
+}
+
+/// The first hit of a primary ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HitInfo {
+    pub position: Vec3,
+    /// Unit normal facing the incoming ray.
+    pub normal: Vec3,
+    pub object: u32,
+    pub triangle: u32,
+    /// Distance along the normalised ray direction.
+    pub distance: f32,
+}
+
+/// One shaded sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleOut {
+    pub id: u64,
+    pub hit: Option<HitInfo>,
+    /// Linear radiance.
+    pub rgb: Vec3,
+}
+
+/// The result of shading a batch.
+#[derive(Debug, Clone, Default)]
+pub struct ShadeOutput {
+    pub samples: Vec<SampleOut>,
+    /// Distinct (light, blocker object, receiver object) triples found by blocked shadow rays.
+    pub triples: Vec<[u32; 3]>,
+    /// Distinct objects hit by the batch's primary rays.
+    pub visible: Vec<u32>,
+    /// Samples whose shading was not finite (replaced by black).
+    pub nonfinite: u32,
+}
+
+/// Shades `requests` in parallel (rayon, on the current pool) with transforms `inst`.
+/// Deterministic for a given `seed`: the random numbers of a request depend only on
+/// (seed, request id).
+pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, seed: u64, requests: &[RayRequest]) -> ShadeOutput {
+    let ShaderSpec::Direct(params) = spec;
+    let per: Vec<(SampleOut, Vec<[u32; 3]>, bool)> =
+        requests.par_iter().map(|r| shade_direct(scene, inst, params, seed, r)).collect();
+    let mut triples = HashSet::new();
+    let mut visible = HashSet::new();
+    let mut nonfinite = 0;
+    let mut samples = Vec::with_capacity(per.len());
+    for (s, t, bad) in per {
+        triples.extend(t);
+        if let Some(h) = &s.hit {
+            visible.insert(h.object);
+        }
+        nonfinite += bad as u32;
+        samples.push(s);
+    }
+    let mut triples: Vec<_> = triples.into_iter().collect();
+    triples.sort_unstable();
+    let mut visible: Vec<_> = visible.into_iter().collect();
+    visible.sort_unstable();
+    ShadeOutput { samples, triples, visible, nonfinite }
+}
+
+fn shade_direct(
+    scene: &LoadedScene,
+    inst: &Instances,
+    p: &DirectParams,
+    seed: u64,
+    r: &RayRequest,
+) -> (SampleOut, Vec<[u32; 3]>, bool) {
+    let s = &scene.scene;
+    let len = r.direction.length();
+    let mut triples = Vec::new();
+    if !(len.is_finite() && len > 0.0 && r.origin.is_finite()) {
+        return (SampleOut { id: r.id, hit: None, rgb: Vec3::ZERO }, triples, true);
+    }
+    let d = r.direction / len;
+    let Some(h) = inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) else {
+        return (SampleOut { id: r.id, hit: None, rgb: s.background }, triples, false);
+    };
+    let obj = &s.objects[h.object as usize];
+    let mat = &obj.material;
+    let front = h.normal.dot(d) < 0.0;
+    let n = if front { h.normal } else { -h.normal };
+    let mut rgb = Vec3::ZERO;
+    if front {
+        rgb += mat.emission;
+    }
+    let albedo = mat.diffuse;
+    let eps = scene.epsilon;
+    let origin = h.position + n * eps;
+    let mut rng = Rng::new(seed, r.id);
+    for (li, light) in scene.lights.iter().enumerate() {
+        let li = li as u32;
+        match light {
+            PreparedLight::Point { position, intensity } => {
+                let to = *position - origin;
+                let d2 = to.length_squared();
+                let dist = d2.sqrt();
+                let wi = to / dist;
+                let cos = n.dot(wi);
+                if cos <= 0.0 {
+                    continue;
+                }
+                match inst.occluded(&scene.bvh, origin, wi, 0.0, dist * (1.0 - 1e-4)) {
+                    Some(b) => push_unique(&mut triples, [li, b, h.object]),
+                    None => rgb += albedo * FRAC_1_PI * *intensity * (cos / d2),
+                }
+            }
+            PreparedLight::Area(a) => {
+                // A point behind the emitting side, or a light wholly below the point's
+                // tangent plane, receives nothing: no rays needed.
+                if a.normal.dot(origin - a.centroid) <= 0.0 || a.vertices.iter().all(|v| n.dot(*v - origin) <= 0.0) {
+                    continue;
+                }
+                let k = p.shadow_rays;
+                let nx = (k as f32).sqrt().ceil() as u32;
+                let ny = k.div_ceil(nx);
+                let cells = nx * ny;
+                let rot = (rng.next_u64() % cells as u64) as u32;
+                let mut sum = Vec3::ZERO;
+                for i in 0..k {
+                    let c = (i + rot) % cells;
+                    let u = ((c % nx) as f32 + rng.next_f32()) / nx as f32;
+                    let v = ((c / nx) as f32 + rng.next_f32()) / ny as f32;
+                    let q = a.sample(u, v);
+                    let to = q - origin;
+                    let d2 = to.length_squared();
+                    let dist = d2.sqrt();
+                    let wi = to / dist;
+                    let cos_x = n.dot(wi);
+                    let cos_l = -a.normal.dot(wi);
+                    if cos_x <= 0.0 || cos_l <= 0.0 {
+                        continue;
+                    }
+                    match inst.occluded(&scene.bvh, origin, wi, 0.0, dist * (1.0 - 1e-4)) {
+                        Some(b) => push_unique(&mut triples, [li, b, h.object]),
+                        None => sum += a.radiance * (cos_x * cos_l / d2),
+                    }
+                }
+                rgb += albedo * FRAC_1_PI * sum * (a.area / k as f32);
+            }
+        }
+    }
+    rgb += albedo * s.ambient * p.ambient;
+    let bad = !rgb.is_finite();
+    if bad {
+        rgb = Vec3::ZERO;
+    }
+    let hit = HitInfo { position: h.position, normal: n, object: h.object, triangle: h.triangle, distance: h.t };
+    (SampleOut { id: r.id, hit: Some(hit), rgb }, triples, bad)
+}
+
+fn push_unique(v: &mut Vec<[u32; 3]>, t: [u32; 3]) {
+    if !v.contains(&t) {
+        v.push(t);
+    }
+}

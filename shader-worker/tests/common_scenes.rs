@@ -1,0 +1,52 @@
+//! Small scenes built in code for the worker tests.
+#![allow(dead_code)]
+use edgepoint_scene::{Camera, Light, Material, Mesh, NoProgress, Object, Scene};
+use glam::{Affine3A, Vec3};
+use std::sync::Arc;
+
+pub fn quad(y: f32, half: f32, up: bool) -> Mesh {
+    let mut p = vec![Vec3::new(-half, y, -half), Vec3::new(-half, y, half), Vec3::new(half, y, half), Vec3::new(half, y, -half)];
+    if !up {
+        p.reverse();
+    }
+    Mesh::from_triangles(p, vec![[0, 1, 2], [0, 2, 3]], &NoProgress)
+}
+
+/// A UV sphere of radius 1 at the origin.
+pub fn sphere(stacks: u32, slices: u32) -> Mesh {
+    let mut p = Vec::new();
+    for i in 0..=stacks {
+        let th = std::f32::consts::PI * i as f32 / stacks as f32;
+        for j in 0..slices {
+            let ph = std::f32::consts::TAU * j as f32 / slices as f32;
+            p.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+        }
+    }
+    let mut t = Vec::new();
+    for i in 0..stacks {
+        for j in 0..slices {
+            let a = i * slices + j;
+            let b = i * slices + (j + 1) % slices;
+            let c = a + slices;
+            let d = b + slices;
+            t.push([a, b, d]);
+            t.push([a, d, c]);
+        }
+    }
+    Mesh::from_triangles(p, t, &NoProgress)
+}
+
+pub fn object(name: &str, mesh: Mesh, albedo: f32) -> Object {
+    Object { name: name.into(), mesh: Arc::new(mesh), material: Material::diffuse(name, Vec3::splat(albedo)), transform: Affine3A::IDENTITY }
+}
+
+pub fn scene(objects: Vec<Object>, lights: Vec<Light>, ambient: f32) -> Scene {
+    Scene {
+        name: "test".into(),
+        objects,
+        lights,
+        camera: Camera { eye: Vec3::new(0.0, 3.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 45.0 },
+        ambient: Vec3::splat(ambient),
+        background: Vec3::new(0.1, 0.2, 0.3),
+    }
+}

@@ -1,0 +1,378 @@
+//! One viewer session with the renderer: the `Renderer.Session` bidirectional stream
+//! (proto/proto/edgepoint.proto) as a typed client. The first message is `start`; the server
+//! answers `started`, then streams frames and, for bad later messages, `rejected` notes.
+//! Also turns a `--scene` argument into the wire `SceneSource` (built-in name or files).
+use anyhow::{bail, Context};
+use edgepoint_proto::{self as pb, renderer_client::RendererClient, server_msg, viewer_msg};
+use std::path::Path;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio_stream::wrappers::UnboundedReceiverStream;
+
+/// Frames of large raw images exceed tonic's 4 MiB default; nothing the server sends is
+/// meant to be refused for size.
+const MAX_MESSAGE_BYTES: usize = 1 << 30;
+
+/// Why a session call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// The URL is malformed or nothing answers there.
+    #[error("cannot connect to {url}: {message}")]
+    Connect { url: String, message: String },
+    /// The server ended the call with a gRPC status (for a bad start: INVALID_ARGUMENT
+    /// naming the problem). Displays as `CODE: message`.
+    #[error("{}: {message}", code_name(*.code))]
+    Status { code: tonic::Code, message: String },
+    /// The server broke the session protocol (e.g. no `started` first).
+    #[error("protocol error: {0}")]
+    Protocol(String),
+    /// The session is over; nothing more can be sent.
+    #[error("the session is closed")]
+    Closed,
+}
+
+impl ClientError {
+    /// The gRPC status code, when the server sent one.
+    pub fn code(&self) -> Option<tonic::Code> {
+        match self {
+            ClientError::Status { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+
+    fn from_status(s: tonic::Status) -> Self {
+        ClientError::Status { code: s.code(), message: s.message().to_string() }
+    }
+}
+
+/// What the server sends after `started`.
+#[derive(Debug, Clone)]
+pub enum Event {
+    /// A rendered frame with its stats.
+    Frame(pb::Frame),
+    /// A later message of ours was ignored (e.g. a NaN camera); the session goes on.
+    Rejected(pb::Rejected),
+}
+
+/// A cloneable handle that sends messages into a session (e.g. from a window's key loop
+/// while another task receives frames). Sending never blocks: messages are queued.
+#[derive(Debug, Clone)]
+pub struct SessionSender {
+    tx: mpsc::UnboundedSender<pb::ViewerMsg>,
+}
+
+impl SessionSender {
+    /// Sends any viewer message.
+    pub fn send(&self, msg: viewer_msg::Msg) -> Result<(), ClientError> {
+        self.tx.send(pb::ViewerMsg { msg: Some(msg) }).map_err(|_| ClientError::Closed)
+    }
+
+    /// Moves the camera.
+    pub fn send_camera(&self, camera: pb::Camera) -> Result<(), ClientError> {
+        self.send(viewer_msg::Msg::Camera(camera))
+    }
+
+    /// Moves an object (by id, or by name when `name` is set).
+    pub fn send_move(&self, mv: pb::ObjectMove) -> Result<(), ClientError> {
+        self.send(viewer_msg::Msg::Move(mv))
+    }
+
+    /// Changes session settings (zero fields keep their value).
+    pub fn send_settings(&self, settings: pb::Settings) -> Result<(), ClientError> {
+        self.send(viewer_msg::Msg::Settings(settings))
+    }
+}
+
+/// An open session: send with the `send_*` methods, receive with [`Self::next_event`].
+/// Dropping it ends the session (the request stream closes).
+#[derive(Debug)]
+pub struct SessionClient {
+    sender: SessionSender,
+    inbound: tonic::Streaming<pb::ServerMsg>,
+}
+
+impl SessionClient {
+    /// Connects to `url` (e.g. `http://127.0.0.1:50051`), sends `start` and waits for
+    /// `started`. A refused start comes back as [`ClientError::Status`] with the server's
+    /// code and message (e.g. `INVALID_ARGUMENT: bunny.ply: face 12: ...`).
+    pub async fn connect(url: &str, start: pb::Start) -> Result<(SessionClient, pb::Started), ClientError> {
+        let connect_err = |message: String| ClientError::Connect { url: url.to_string(), message };
+        let endpoint = tonic::transport::Endpoint::from_shared(url.to_string())
+            .map_err(|e| connect_err(format!("invalid URL ({})", error_chain(&e))))?
+            .connect_timeout(Duration::from_secs(10))
+            .tcp_nodelay(true);
+        let channel = endpoint.connect().await.map_err(|e| connect_err(error_chain(&e)))?;
+        let mut client = RendererClient::new(channel)
+            .max_decoding_message_size(MAX_MESSAGE_BYTES)
+            .max_encoding_message_size(MAX_MESSAGE_BYTES);
+        let (tx, rx) = mpsc::unbounded_channel();
+        let sender = SessionSender { tx };
+        sender.send(viewer_msg::Msg::Start(start))?;
+        let response = client.session(UnboundedReceiverStream::new(rx)).await.map_err(ClientError::from_status)?;
+        let mut inbound = response.into_inner();
+        let started = match inbound.message().await {
+            Ok(Some(pb::ServerMsg { msg: Some(server_msg::Msg::Started(s)) })) => s,
+            Ok(Some(other)) => {
+                return Err(ClientError::Protocol(format!("expected `started` first, got {}", msg_kind(&other))))
+            }
+            Ok(None) => return Err(ClientError::Protocol("the server closed the session before `started`".into())),
+            Err(status) => return Err(ClientError::from_status(status)),
+        };
+        Ok((SessionClient { sender, inbound }, started))
+    }
+
+    /// A handle for sending from elsewhere (another task or thread).
+    pub fn sender(&self) -> SessionSender {
+        self.sender.clone()
+    }
+
+    /// Moves the camera.
+    pub fn send_camera(&self, camera: pb::Camera) -> Result<(), ClientError> {
+        self.sender.send_camera(camera)
+    }
+
+    /// Moves an object.
+    pub fn send_move(&self, mv: pb::ObjectMove) -> Result<(), ClientError> {
+        self.sender.send_move(mv)
+    }
+
+    /// Changes session settings.
+    pub fn send_settings(&self, settings: pb::Settings) -> Result<(), ClientError> {
+        self.sender.send_settings(settings)
+    }
+
+    /// The next frame or rejection; `None` when the server ended the session normally,
+    /// `Some(Err(..))` when it ended it with an error status.
+    pub async fn next_event(&mut self) -> Option<Result<Event, ClientError>> {
+        loop {
+            return match self.inbound.message().await {
+                Ok(Some(m)) => match m.msg {
+                    Some(server_msg::Msg::Frame(f)) => Some(Ok(Event::Frame(f))),
+                    Some(server_msg::Msg::Rejected(r)) => Some(Ok(Event::Rejected(r))),
+                    Some(server_msg::Msg::Started(_)) => {
+                        Some(Err(ClientError::Protocol("a second `started` in one session".into())))
+                    }
+                    // A message kind newer than this viewer: skip it.
+                    None => continue,
+                },
+                Ok(None) => None,
+                Err(status) => Some(Err(ClientError::from_status(status))),
+            };
+        }
+    }
+}
+
+fn msg_kind(m: &pb::ServerMsg) -> &'static str {
+    match &m.msg {
+        Some(server_msg::Msg::Started(_)) => "started",
+        Some(server_msg::Msg::Frame(_)) => "frame",
+        Some(server_msg::Msg::Rejected(_)) => "rejected",
+        None => "an empty message",
+    }
+}
+
+/// The error and its sources, joined (tonic's transport errors say little on their own).
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        let t = c.to_string();
+        if !s.contains(&t) {
+            s.push_str(": ");
+            s.push_str(&t);
+        }
+        cur = c.source();
+    }
+    s
+}
+
+/// The canonical upper-case name of a gRPC status code (`INVALID_ARGUMENT`).
+pub fn code_name(code: tonic::Code) -> &'static str {
+    use tonic::Code::*;
+    match code {
+        Ok => "OK",
+        Cancelled => "CANCELLED",
+        Unknown => "UNKNOWN",
+        InvalidArgument => "INVALID_ARGUMENT",
+        DeadlineExceeded => "DEADLINE_EXCEEDED",
+        NotFound => "NOT_FOUND",
+        AlreadyExists => "ALREADY_EXISTS",
+        PermissionDenied => "PERMISSION_DENIED",
+        ResourceExhausted => "RESOURCE_EXHAUSTED",
+        FailedPrecondition => "FAILED_PRECONDITION",
+        Aborted => "ABORTED",
+        OutOfRange => "OUT_OF_RANGE",
+        Unimplemented => "UNIMPLEMENTED",
+        Internal => "INTERNAL",
+        Unavailable => "UNAVAILABLE",
+        DataLoss => "DATA_LOSS",
+        Unauthenticated => "UNAUTHENTICATED",
+    }
+}
+
+/// The wire camera for a scene camera.
+pub fn camera_to_wire(c: &edgepoint_scene::Camera) -> pb::Camera {
+    pb::Camera {
+        eye: Some(c.eye.into()),
+        target: Some(c.target.into()),
+        up: Some(c.up.into()),
+        fov_y_degrees: c.fov_y_degrees,
+    }
+}
+
+/// The scene camera for a wire camera (absent vectors read as zero; the result may need
+/// [`edgepoint_scene::Camera::validate`]).
+pub fn camera_from_wire(c: &pb::Camera) -> edgepoint_scene::Camera {
+    edgepoint_scene::Camera {
+        eye: pb::vec3_or_zero(&c.eye),
+        target: pb::vec3_or_zero(&c.target),
+        up: pb::vec3_or_zero(&c.up),
+        fov_y_degrees: c.fov_y_degrees,
+    }
+}
+
+/// Turns a `--scene` argument into a scene source. A bare name (no path separator, no
+/// extension, and no file of that name) is a built-in scene (`cornell`); anything else is
+/// a file path: `.ply` is sent alone, `.obj` together with the `mtllib` files it names
+/// (resolved next to it). Errors name the path (and the OBJ line of a missing `mtllib`).
+pub fn scene_source_from_arg(arg: &str) -> anyhow::Result<pb::SceneSource> {
+    if arg.trim().is_empty() {
+        bail!("empty scene: give a built-in name (e.g. cornell) or a .ply / .obj file path");
+    }
+    let path = Path::new(arg);
+    let has_separator = arg.contains('/') || arg.contains(std::path::MAIN_SEPARATOR);
+    if !has_separator && path.extension().is_none() && !path.is_file() {
+        return Ok(pb::builtin_source(arg));
+    }
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let main_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| arg.to_string());
+    let read = |p: &Path| std::fs::read(p).with_context(|| format!("cannot read scene file {}", p.display()));
+    match ext.as_deref() {
+        Some("ply") => Ok(pb::files_source(vec![(main_name, read(path)?)])),
+        Some("obj") => {
+            let data = read(path)?;
+            let mut files = vec![];
+            let dir = path.parent().unwrap_or(Path::new(""));
+            for (line_no, name) in obj_mtllibs(&data) {
+                if files.iter().any(|(n, _)| n == &name) {
+                    continue;
+                }
+                let p = dir.join(&name);
+                let bytes = std::fs::read(&p).with_context(|| {
+                    format!("{}: line {line_no}: mtllib {name}: cannot read {}", path.display(), p.display())
+                })?;
+                files.push((name, bytes));
+            }
+            files.insert(0, (main_name, data));
+            Ok(pb::files_source(files))
+        }
+        Some(other) => bail!("{}: unsupported scene file type '.{other}' (supported: .ply, .obj)", path.display()),
+        None => bail!(
+            "{}: a scene file needs a .ply or .obj extension (built-in scenes are named without one: {})",
+            path.display(),
+            builtin_names()
+        ),
+    }
+}
+
+fn builtin_names() -> String {
+    edgepoint_scene::builtin::BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+}
+
+/// `(line number, file name)` for every name on every `mtllib` line of an OBJ file.
+fn obj_mtllibs(data: &[u8]) -> Vec<(usize, String)> {
+    let text = String::from_utf8_lossy(data);
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if words.next() == Some("mtllib") {
+            out.extend(words.map(|w| (i + 1, w.to_string())));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use edgepoint_proto::scene_source::Source;
+
+    fn files_of(src: &pb::SceneSource) -> Vec<(String, Vec<u8>)> {
+        match &src.source {
+            Some(Source::Files(f)) => f.files.iter().map(|f| (f.name.clone(), f.data.clone())).collect(),
+            other => panic!("expected files, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn bare_names_are_builtins() {
+        for name in ["cornell", "cornell-point", "no-such-scene"] {
+            let src = scene_source_from_arg(name).unwrap();
+            assert_eq!(src.source, Some(Source::Builtin(name.to_string())));
+        }
+    }
+
+    #[test]
+    fn ply_paths_are_read_from_disk() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("thing.PLY");
+        std::fs::write(&p, b"ply\nformat ascii 1.0\nend_header\n").unwrap();
+        let src = scene_source_from_arg(p.to_str().unwrap()).unwrap();
+        assert_eq!(files_of(&src), vec![("thing.PLY".to_string(), b"ply\nformat ascii 1.0\nend_header\n".to_vec())]);
+    }
+
+    #[test]
+    fn obj_paths_bring_their_mtllibs() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = b"# box\nmtllib a.mtl  b.mtl\nv 0 0 0\nmtllib a.mtl\nf 1 1 1\n".to_vec();
+        std::fs::write(dir.path().join("box.obj"), &obj).unwrap();
+        std::fs::write(dir.path().join("a.mtl"), b"newmtl red\nKd 1 0 0\n").unwrap();
+        std::fs::write(dir.path().join("b.mtl"), b"newmtl blue\nKd 0 0 1\n").unwrap();
+        let src = scene_source_from_arg(dir.path().join("box.obj").to_str().unwrap()).unwrap();
+        let files = files_of(&src);
+        let names: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
+        assert_eq!(names, ["box.obj", "a.mtl", "b.mtl"], "main file first, each mtllib once");
+        assert_eq!(files[0].1, obj);
+        assert_eq!(files[2].1, b"newmtl blue\nKd 0 0 1\n");
+    }
+
+    #[test]
+    fn missing_files_are_named() {
+        let err = scene_source_from_arg("/no/such/dir/bunny.ply").unwrap_err();
+        let msg = format!("{err:#}");
+        assert!(msg.contains("/no/such/dir/bunny.ply"), "{msg}");
+
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("m.obj"), b"v 0 0 0\n\nmtllib gone.mtl\n").unwrap();
+        let msg = format!("{:#}", scene_source_from_arg(dir.path().join("m.obj").to_str().unwrap()).unwrap_err());
+        assert!(msg.contains("line 3") && msg.contains("gone.mtl"), "{msg}");
+
+        // A relative path with a separator is a file even without an extension.
+        let msg = format!("{:#}", scene_source_from_arg("scenes/cornell").unwrap_err());
+        assert!(msg.contains("scenes/cornell") && msg.contains(".ply"), "{msg}");
+    }
+
+    #[test]
+    fn unsupported_extensions_are_refused() {
+        let msg = format!("{:#}", scene_source_from_arg("model.gltf").unwrap_err());
+        assert!(msg.contains("model.gltf") && msg.contains(".gltf"), "{msg}");
+    }
+
+    #[test]
+    fn status_errors_display_code_and_message() {
+        let e = ClientError::from_status(tonic::Status::invalid_argument("bunny.ply: face 12: index 99 out of range"));
+        assert_eq!(e.to_string(), "INVALID_ARGUMENT: bunny.ply: face 12: index 99 out of range");
+        assert_eq!(e.code(), Some(tonic::Code::InvalidArgument));
+    }
+
+    #[test]
+    fn cameras_round_trip_through_the_wire() {
+        let c = edgepoint_scene::Camera {
+            eye: glam::Vec3::new(1.0, 2.0, 3.0),
+            target: glam::Vec3::new(0.0, 0.5, -1.0),
+            up: glam::Vec3::Y,
+            fov_y_degrees: 39.3,
+        };
+        assert_eq!(camera_from_wire(&camera_to_wire(&c)), c);
+    }
+}

@@ -1,0 +1,564 @@
+//! A local cluster: N `edgepoint-worker` processes and one `edgepoint-server` wired to
+//! them, started as children of this process (DESIGN.md, "Processes and data flow").
+//!
+//! Every child binds port 0 and reports its address with one `listening <addr>` line on
+//! stdout (the launcher contract of COMMON.md). The children die with the cluster: `Drop`
+//! kills and reaps them; on Linux they also carry `PR_SET_PDEATHSIG(SIGKILL)` so a hard kill
+//! of this process takes them along; and they run in their own process group so a terminal
+//! Ctrl-C reaches only the viewer, which then shuts them down itself instead of racing them.
+use anyhow::{anyhow, bail, Context, Result};
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{BufRead, BufReader, Write};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// File name of the shader worker binary.
+pub const WORKER_BIN: &str = "edgepoint-worker";
+/// File name of the render server binary.
+pub const SERVER_BIN: &str = "edgepoint-server";
+/// Environment variable naming a directory that holds the edgepoint binaries.
+pub const BIN_DIR_ENV: &str = "EDGEPOINT_BIN_DIR";
+
+/// How many of a child's last stderr lines an error message quotes.
+const STDERR_TAIL_LINES: usize = 40;
+
+/// What to start and how.
+#[derive(Debug, Clone)]
+pub struct LocalOptions {
+    /// Number of shader workers (at least 1).
+    pub workers: usize,
+    /// `--threads N` for each worker; `None` lets the worker choose.
+    pub worker_threads: Option<usize>,
+    /// Extra arguments appended to the server's command line.
+    pub server_args: Vec<String>,
+    /// Extra arguments appended to every worker's command line.
+    pub worker_args: Vec<String>,
+    /// Directory searched first for the binaries (before [`find_binary`]'s search).
+    pub bin_dir: Option<PathBuf>,
+    /// `RUST_LOG` for the children; `None` passes this process's environment on.
+    pub log_level: Option<String>,
+    /// Append the children's stderr (prefixed with their name) to this file instead of
+    /// forwarding it to this process's stderr.
+    pub log_file: Option<PathBuf>,
+    /// How long a child may take to print its `listening` line.
+    pub startup_timeout: Duration,
+}
+
+impl Default for LocalOptions {
+    fn default() -> Self {
+        LocalOptions {
+            workers: 2,
+            worker_threads: None,
+            server_args: Vec::new(),
+            worker_args: Vec::new(),
+            bin_dir: None,
+            log_level: None,
+            log_file: None,
+            startup_timeout: Duration::from_secs(60),
+        }
+    }
+}
+
+/// A running local cluster. Dropping it kills and reaps every child.
+pub struct LocalCluster {
+    opts: LocalOptions,
+    worker_bin: PathBuf,
+    server_bin: PathBuf,
+    /// Worker slots keep their address after a kill so a restart reuses the port.
+    workers: Vec<WorkerSlot>,
+    server: Option<ChildProc>,
+    server_addr: SocketAddr,
+    spawner: Spawner,
+    log_sink: LogSink,
+}
+
+struct WorkerSlot {
+    addr: SocketAddr,
+    proc: Option<ChildProc>,
+}
+
+impl LocalCluster {
+    /// Starts `opts.workers` workers, waits for each to report its address, then starts the
+    /// server pointed at all of them and waits for its address. On any failure the children
+    /// started so far are killed and the error names the binary and quotes its stderr.
+    pub fn start(opts: LocalOptions) -> Result<LocalCluster> {
+        if opts.workers == 0 {
+            bail!("a local cluster needs at least one worker (got --workers 0)");
+        }
+        let worker_bin = find_binary_in(WORKER_BIN, opts.bin_dir.as_deref())?;
+        let server_bin = find_binary_in(SERVER_BIN, opts.bin_dir.as_deref())?;
+        let log_sink = LogSink::new(opts.log_file.as_deref())?;
+        let spawner = Spawner::new()?;
+        let mut cluster = LocalCluster {
+            opts,
+            worker_bin,
+            server_bin,
+            workers: Vec::new(),
+            server: None,
+            server_addr: SocketAddr::from(([127, 0, 0, 1], 0)),
+            spawner,
+            log_sink,
+        };
+        // Workers start concurrently (each loads nothing until asked, but process start-up
+        // and their runtimes still take a moment); we then wait for each in turn.
+        let mut pending = Vec::new();
+        for i in 0..cluster.opts.workers {
+            let args = cluster.worker_args("127.0.0.1:0");
+            let label = format!("{WORKER_BIN} #{i}");
+            pending.push(cluster.spawn_child(&label, &cluster.worker_bin.clone(), &args)?);
+        }
+        let mut pending = pending.into_iter();
+        while let Some(p) = pending.next() {
+            let (proc, addr) = match cluster.wait_listening(p) {
+                Ok(x) => x,
+                Err(e) => {
+                    // Those not yet waited for are not in the cluster: its Drop misses them.
+                    for mut rest in pending {
+                        let _ = rest.child.kill();
+                        let _ = rest.child.wait();
+                    }
+                    return Err(e);
+                }
+            };
+            tracing::info!(worker = cluster.workers.len(), %addr, pid = proc.child.id(), "local worker listening");
+            cluster.workers.push(WorkerSlot { addr, proc: Some(proc) });
+        }
+        let mut args = vec!["--listen".to_string(), "127.0.0.1:0".to_string()];
+        for w in &cluster.workers {
+            args.push("--worker".into());
+            args.push(format!("http://{}", w.addr));
+        }
+        args.extend(cluster.opts.server_args.iter().cloned());
+        let p = cluster.spawn_child(SERVER_BIN, &cluster.server_bin.clone(), &args)?;
+        let (proc, addr) = cluster.wait_listening(p)?;
+        tracing::info!(%addr, pid = proc.child.id(), "local server listening");
+        cluster.server = Some(proc);
+        cluster.server_addr = addr;
+        Ok(cluster)
+    }
+
+    /// The server's address.
+    pub fn server_addr(&self) -> SocketAddr {
+        self.server_addr
+    }
+
+    /// The server's URL for [`crate::SessionClient::connect`] (`http://127.0.0.1:PORT`).
+    pub fn server_url(&self) -> String {
+        format!("http://{}", self.server_addr)
+    }
+
+    /// The workers' addresses, in start order (kept across kills and restarts).
+    pub fn worker_addrs(&self) -> Vec<SocketAddr> {
+        self.workers.iter().map(|w| w.addr).collect()
+    }
+
+    /// Number of worker slots.
+    pub fn worker_count(&self) -> usize {
+        self.workers.len()
+    }
+
+    /// Process id of worker `i`, `None` if it was killed (or `i` is out of range).
+    pub fn pid(&self, i: usize) -> Option<u32> {
+        self.workers.get(i)?.proc.as_ref().map(|p| p.child.id())
+    }
+
+    /// Process id of the server.
+    pub fn server_pid(&self) -> Option<u32> {
+        self.server.as_ref().map(|p| p.child.id())
+    }
+
+    /// Whether worker `i`'s process is still running.
+    pub fn worker_alive(&mut self, i: usize) -> bool {
+        match self.workers.get_mut(i).and_then(|w| w.proc.as_mut()) {
+            Some(p) => matches!(p.child.try_wait(), Ok(None)),
+            None => false,
+        }
+    }
+
+    /// Kills worker `i` with SIGKILL and reaps it (a crash, for failure tests). Killing a
+    /// worker that is already dead is a no-op.
+    pub fn kill_worker(&mut self, i: usize) -> Result<()> {
+        let n = self.workers.len();
+        let slot = self.workers.get_mut(i).ok_or_else(|| anyhow!("no worker {i} (the cluster has {n})"))?;
+        if let Some(mut p) = slot.proc.take() {
+            p.kill_and_reap();
+            tracing::info!(worker = i, addr = %slot.addr, "local worker killed");
+        }
+        Ok(())
+    }
+
+    /// Starts a new worker `i` on the same address as before (killing the old process
+    /// first if it still runs), so the server's link to that address reconnects. The port
+    /// may briefly be unavailable after the kill; binding is retried for a few seconds.
+    pub fn restart_worker(&mut self, i: usize) -> Result<()> {
+        self.kill_worker(i)?;
+        let addr = self.workers[i].addr;
+        let args = self.worker_args(&addr.to_string());
+        let label = format!("{WORKER_BIN} #{i}");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            let p = self.spawn_child(&label, &self.worker_bin.clone(), &args)?;
+            match self.wait_listening(p) {
+                Ok((proc, got)) => {
+                    if got.port() != addr.port() {
+                        let mut proc = proc;
+                        proc.kill_and_reap();
+                        bail!("{label} was asked to listen on {addr} but reported {got}");
+                    }
+                    tracing::info!(worker = i, %addr, pid = proc.child.id(), "local worker restarted");
+                    self.workers[i].proc = Some(proc);
+                    return Ok(());
+                }
+                Err(e) if Instant::now() < deadline => {
+                    tracing::debug!("restarting {label} on {addr} failed, retrying: {e:#}");
+                    thread::sleep(Duration::from_millis(200));
+                }
+                Err(e) => return Err(e.context(format!("restarting {label} on {addr}"))),
+            }
+        }
+    }
+
+    fn worker_args(&self, listen: &str) -> Vec<String> {
+        let mut args = vec!["--listen".to_string(), listen.to_string()];
+        if let Some(t) = self.opts.worker_threads {
+            args.push("--threads".into());
+            args.push(t.to_string());
+        }
+        args.extend(self.opts.worker_args.iter().cloned());
+        args
+    }
+
+    fn spawn_child(&self, label: &str, bin: &Path, args: &[String]) -> Result<PendingChild> {
+        let mut cmd = Command::new(bin);
+        cmd.args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+        if let Some(level) = &self.opts.log_level {
+            cmd.env("RUST_LOG", level);
+        }
+        die_with_parent(&mut cmd);
+        let mut child = self
+            .spawner
+            .spawn(cmd)
+            .with_context(|| format!("starting {label} ({})", bin.display()))?;
+        let stdout = child.stdout.take().expect("stdout is piped");
+        let stderr = child.stderr.take().expect("stderr is piped");
+        let tail = Arc::new(Mutex::new(VecDeque::with_capacity(STDERR_TAIL_LINES)));
+        let stderr_thread = {
+            let tail = tail.clone();
+            let sink = self.log_sink.clone();
+            let prefix = format!("[{label}] ");
+            thread::Builder::new().name(format!("{label} stderr")).spawn(move || {
+                for line in BufReader::new(stderr).lines() {
+                    let Ok(line) = line else { break };
+                    sink.write_line(&prefix, &line);
+                    let mut t = tail.lock().unwrap_or_else(|e| e.into_inner());
+                    if t.len() == STDERR_TAIL_LINES {
+                        t.pop_front();
+                    }
+                    t.push_back(line);
+                }
+            })?
+        };
+        let (tx, rx) = mpsc::channel();
+        {
+            let label = label.to_string();
+            thread::Builder::new().name(format!("{label} stdout")).spawn(move || {
+                let mut reported = false;
+                for line in BufReader::new(stdout).lines() {
+                    let Ok(line) = line else { break };
+                    if !reported {
+                        if let Some(rest) = line.trim().strip_prefix("listening ") {
+                            reported = true;
+                            let _ = tx.send(StdoutEvent::Listening(rest.trim().to_string()));
+                            continue;
+                        }
+                    }
+                    // Keep draining so the child never blocks on a full pipe.
+                    tracing::debug!("{label} stdout: {line}");
+                }
+                let _ = tx.send(StdoutEvent::Closed);
+            })?;
+        }
+        Ok(PendingChild {
+            label: label.to_string(),
+            bin: bin.to_path_buf(),
+            child,
+            tail,
+            stderr_thread,
+            stdout_events: rx,
+        })
+    }
+
+    fn wait_listening(&self, p: PendingChild) -> Result<(ChildProc, SocketAddr)> {
+        let PendingChild { label, bin, child, tail, stderr_thread, stdout_events } = p;
+        let mut proc = ChildProc { child, tail };
+        let timeout = self.opts.startup_timeout;
+        let outcome = match stdout_events.recv_timeout(timeout) {
+            Ok(StdoutEvent::Listening(addr)) => match addr.parse::<SocketAddr>() {
+                Ok(a) => return Ok((proc, a)),
+                Err(e) => format!("printed `listening {addr}`, which is not a socket address ({e})"),
+            },
+            Ok(StdoutEvent::Closed) | Err(mpsc::RecvTimeoutError::Disconnected) => {
+                // Give the process a moment to exit and its stderr thread to drain.
+                let deadline = Instant::now() + Duration::from_secs(2);
+                let mut status = None;
+                while Instant::now() < deadline {
+                    if let Ok(Some(s)) = proc.child.try_wait() {
+                        status = Some(s);
+                        if stderr_thread.is_finished() {
+                            break;
+                        }
+                    }
+                    thread::sleep(Duration::from_millis(20));
+                }
+                match status {
+                    Some(s) => format!("exited ({s}) before printing `listening <addr>`"),
+                    None => "closed its stdout without printing `listening <addr>`".to_string(),
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                format!("did not print `listening <addr>` within {:.0} s", timeout.as_secs_f64())
+            }
+        };
+        proc.kill_and_reap();
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while !stderr_thread.is_finished() && Instant::now() < deadline {
+            thread::sleep(Duration::from_millis(10));
+        }
+        let stderr = proc.stderr_tail();
+        let stderr = if stderr.trim().is_empty() {
+            "its stderr was empty".to_string()
+        } else {
+            format!("its stderr ended with:\n{stderr}")
+        };
+        bail!("{label} ({}) {outcome}; {stderr}", bin.display())
+    }
+}
+
+impl Drop for LocalCluster {
+    fn drop(&mut self) {
+        // The server first, so it does not log reconnect attempts to dying workers.
+        if let Some(mut s) = self.server.take() {
+            s.kill_and_reap();
+        }
+        for w in &mut self.workers {
+            if let Some(mut p) = w.proc.take() {
+                p.kill_and_reap();
+            }
+        }
+    }
+}
+
+impl std::fmt::Debug for LocalCluster {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LocalCluster")
+            .field("server_addr", &self.server_addr)
+            .field("worker_addrs", &self.worker_addrs())
+            .finish()
+    }
+}
+
+enum StdoutEvent {
+    Listening(String),
+    Closed,
+}
+
+struct PendingChild {
+    label: String,
+    bin: PathBuf,
+    child: Child,
+    tail: Arc<Mutex<VecDeque<String>>>,
+    stderr_thread: thread::JoinHandle<()>,
+    stdout_events: mpsc::Receiver<StdoutEvent>,
+}
+
+struct ChildProc {
+    child: Child,
+    tail: Arc<Mutex<VecDeque<String>>>,
+}
+
+impl ChildProc {
+    fn kill_and_reap(&mut self) {
+        // std's kill() is SIGKILL on Unix; an error means it already exited.
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    fn stderr_tail(&self) -> String {
+        let t = self.tail.lock().unwrap_or_else(|e| e.into_inner());
+        t.iter().map(String::as_str).collect::<Vec<_>>().join("\n")
+    }
+}
+
+/// Where children's stderr lines go.
+#[derive(Clone)]
+enum LogSink {
+    Stderr,
+    File(Arc<Mutex<File>>),
+}
+
+impl LogSink {
+    fn new(path: Option<&Path>) -> Result<LogSink> {
+        Ok(match path {
+            None => LogSink::Stderr,
+            Some(p) => {
+                let f = std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(p)
+                    .with_context(|| format!("opening the cluster log file {}", p.display()))?;
+                LogSink::File(Arc::new(Mutex::new(f)))
+            }
+        })
+    }
+
+    fn write_line(&self, prefix: &str, line: &str) {
+        match self {
+            LogSink::Stderr => {
+                let mut e = std::io::stderr().lock();
+                let _ = writeln!(e, "{prefix}{line}");
+            }
+            LogSink::File(f) => {
+                let mut f = f.lock().unwrap_or_else(|e| e.into_inner());
+                let _ = writeln!(f, "{prefix}{line}");
+            }
+        }
+    }
+}
+
+/// A thread that lives as long as the cluster and forks every child.
+///
+/// Linux delivers PR_SET_PDEATHSIG when the *thread* that forked the child exits, not the
+/// process. Forking from whatever thread calls us (a tokio blocking-pool thread retires
+/// after 10 s idle) would kill children at random; this thread exits only when the cluster
+/// is dropped, after the cluster has already killed its children.
+struct Spawner {
+    tx: mpsc::Sender<(Command, mpsc::Sender<std::io::Result<Child>>)>,
+}
+
+impl Spawner {
+    fn new() -> Result<Spawner> {
+        let (tx, rx) = mpsc::channel::<(Command, mpsc::Sender<std::io::Result<Child>>)>();
+        thread::Builder::new().name("edgepoint-spawner".into()).spawn(move || {
+            while let Ok((mut cmd, reply)) = rx.recv() {
+                let _ = reply.send(cmd.spawn());
+            }
+        })?;
+        Ok(Spawner { tx })
+    }
+
+    fn spawn(&self, cmd: Command) -> std::io::Result<Child> {
+        let (rtx, rrx) = mpsc::channel();
+        let gone = || std::io::Error::other("the spawner thread is gone");
+        self.tx.send((cmd, rtx)).map_err(|_| gone())?;
+        rrx.recv().map_err(|_| gone())?
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn die_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: the closure runs between fork and exec and only makes async-signal-safe
+    // system calls (prctl, getppid, setpgid), touching no memory but its captured pid.
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL as libc::c_ulong, 0, 0, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent may have died between fork and prctl: then nobody would kill us.
+            if libc::getppid() != parent {
+                return Err(std::io::Error::other("the launching process exited during spawn"));
+            }
+            if libc::setpgid(0, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
+#[cfg(all(unix, not(target_os = "linux")))]
+fn die_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    cmd.process_group(0);
+}
+
+#[cfg(not(unix))]
+fn die_with_parent(_cmd: &mut Command) {}
+
+/// Finds an edgepoint binary: [`BIN_DIR_ENV`] (`EDGEPOINT_BIN_DIR`), the directory of the
+/// current executable, that directory's parent (test executables live in
+/// `target/<profile>/deps`), then `PATH`. The error lists every place it looked.
+pub fn find_binary(name: &str) -> Result<PathBuf> {
+    find_binary_in(name, None)
+}
+
+/// [`find_binary`], searching `first` before everything else when given.
+pub fn find_binary_in(name: &str, first: Option<&Path>) -> Result<PathBuf> {
+    let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
+    let mut looked: Vec<String> = Vec::new();
+    let mut candidates: Vec<(PathBuf, String)> = Vec::new();
+    if let Some(d) = first {
+        candidates.push((d.to_path_buf(), "--bin-dir".into()));
+    }
+    match std::env::var_os(BIN_DIR_ENV) {
+        Some(d) if !d.is_empty() => candidates.push((PathBuf::from(d), BIN_DIR_ENV.into())),
+        _ => looked.push(format!("{BIN_DIR_ENV} (not set)")),
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        if let Some(dir) = exe.parent() {
+            candidates.push((dir.to_path_buf(), "directory of the current executable".into()));
+            if let Some(up) = dir.parent() {
+                candidates.push((up.to_path_buf(), "its parent".into()));
+            }
+        }
+    }
+    for (dir, why) in candidates {
+        let p = dir.join(&file);
+        if is_executable(&p) {
+            return Ok(p);
+        }
+        looked.push(format!("{} ({why})", dir.display()));
+    }
+    match std::env::var_os("PATH") {
+        Some(path) => {
+            let dirs: Vec<PathBuf> = std::env::split_paths(&path).collect();
+            for d in &dirs {
+                let p = d.join(&file);
+                if is_executable(&p) {
+                    return Ok(p);
+                }
+            }
+            looked.push(format!("PATH ({} directories)", dirs.len()));
+        }
+        None => looked.push("PATH (not set)".into()),
+    }
+    bail!(
+        "cannot find the `{name}` binary; looked in:\n  {}\nbuild it with `cargo build --release` \
+         (it lands in target/release/) and run the viewer from there, or set {BIN_DIR_ENV} to the \
+         directory that holds it",
+        looked.join("\n  ")
+    )
+}
+
+fn is_executable(p: &Path) -> bool {
+    let Ok(meta) = std::fs::metadata(p) else { return false };
+    if !meta.is_file() {
+        return false;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        meta.permissions().mode() & 0o111 != 0
+    }
+    #[cfg(not(unix))]
+    {
+        true
+    }
+}

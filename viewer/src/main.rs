@@ -1,0 +1,450 @@
+//! `edgepoint-viewer`: connects to an edgepoint render server (or starts a local cluster of
+//! one server and N shader workers), shows the frames in a window when a display exists,
+//! or writes them as PNGs plus per-frame JSON stats when it does not.
+use anyhow::{bail, Context, Result};
+use clap::{Parser, ValueEnum};
+use edgepoint_proto::{self as pb, FrameEncoding};
+use edgepoint_viewer::client::{camera_to_wire, code_name, SessionSender};
+use edgepoint_viewer::frame::{decode_frame, to_0rgb};
+use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
+use edgepoint_viewer::local::{LocalCluster, LocalOptions};
+use edgepoint_viewer::script::{Script, ScriptStep};
+use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
+use edgepoint_viewer::{scene_source_from_arg, Event, SessionClient};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+use tokio::sync::watch;
+
+/// Output directory of a headless run when --out is not given.
+const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
+
+/// View frames from an edgepoint render server (edge-and-point rendering, Bala et al. 2003).
+///
+/// Without --server, starts a local cluster: --workers shader workers and one server, as
+/// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
+/// without --headless, frames show in a window (arrows / A-D orbit, W/S dolly, Esc quits);
+/// otherwise each frame is written as OUT/frame_00001.png with one JSON line of stats per
+/// frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
+#[derive(Debug, Parser)]
+#[command(name = "edgepoint-viewer", version)]
+struct Args {
+    /// Connect to a running edgepoint-server at URL (e.g. http://127.0.0.1:50051) instead
+    /// of starting a local cluster.
+    #[arg(long, value_name = "URL", conflicts_with = "local")]
+    server: Option<String>,
+
+    /// Start a local cluster (shader workers + one server, as child processes) and view it.
+    /// This is the default when --server is not given.
+    #[arg(long)]
+    local: bool,
+
+    /// Number of shader workers in the local cluster.
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=256))]
+    workers: u32,
+
+    /// Threads per local shader worker (passed on as `--threads N`); by default each worker
+    /// picks its own.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    worker_threads: Option<u32>,
+
+    /// Directory holding edgepoint-server and edgepoint-worker for the local cluster
+    /// (searched first; then EDGEPOINT_BIN_DIR, this executable's directory and its parent,
+    /// then PATH).
+    #[arg(long, value_name = "DIR")]
+    bin_dir: Option<PathBuf>,
+
+    /// Extra argument for the local server's command line; repeat for several
+    /// (e.g. --server-arg=--some-flag --server-arg=3).
+    #[arg(long, value_name = "ARG", allow_hyphen_values = true)]
+    server_arg: Vec<String>,
+
+    /// RUST_LOG filter for the local server and workers (default: this process's RUST_LOG).
+    #[arg(long, value_name = "FILTER")]
+    cluster_log: Option<String>,
+
+    /// Append the local server's and workers' logs to FILE instead of showing them on stderr.
+    #[arg(long, value_name = "FILE")]
+    cluster_log_file: Option<PathBuf>,
+
+    /// Scene to render: a built-in name (cornell, cornell-point) or a .ply / .obj file
+    /// (an OBJ's mtllib files are sent along from its directory).
+    #[arg(long, value_name = "NAME|PATH", default_value = "cornell")]
+    scene: String,
+
+    /// Frame width in pixels.
+    #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    width: u32,
+
+    /// Frame height in pixels.
+    #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: u32,
+
+    /// Shader the workers run for each sample (e.g. direct).
+    #[arg(long, value_name = "NAME", default_value = "direct")]
+    shader: String,
+
+    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16); repeat for several.
+    #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
+    shader_param: Vec<(String, f64)>,
+
+    /// Encoding of the frames the server sends.
+    #[arg(long, value_enum, default_value_t = Encoding::Qoi)]
+    encoding: Encoding,
+
+    /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    frames: u64,
+
+    /// Write every frame as DIR/frame_00001.png ... and per-frame stats to DIR/stats.jsonl.
+    /// Headless runs write to ./edgepoint-frames when not given; with a window, only when given.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+
+    /// Never open a window, even when a display exists.
+    #[arg(long)]
+    headless: bool,
+
+    /// Orbit the camera about the vertical axis through its target, one step per frame.
+    #[arg(long)]
+    orbit: bool,
+
+    /// Orbit step in degrees per received frame (with --orbit; negative turns the other way).
+    #[arg(long, value_name = "DEGREES", default_value_t = 1.0, allow_negative_numbers = true, value_parser = parse_finite_f32)]
+    orbit_speed: f32,
+
+    /// Slide the named scene object back and forth along X (25% of the scene's width,
+    /// 120 frames per cycle), one move per received frame.
+    #[arg(long, value_name = "NAME")]
+    move_object: Option<String>,
+
+    /// Pixels per new sample per frame (the paper uses 40-125); the server's default is 64.
+    #[arg(long, value_name = "RATIO", allow_negative_numbers = true, value_parser = parse_positive_f64)]
+    sparseness: Option<f64>,
+
+    /// Cap on the server's frame rate (frames per second); the server's default is 30.
+    #[arg(long, value_name = "FPS", allow_negative_numbers = true, value_parser = parse_positive_f64)]
+    max_fps: Option<f64>,
+
+    /// Do not print the per-frame stats lines on stdout (stats.jsonl is still written).
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Encoding {
+    /// QOI: lossless, fast.
+    Qoi,
+    /// PNG: lossless, smaller, slower to encode.
+    Png,
+    /// JPEG: lossy, smallest.
+    Jpeg,
+    /// Raw 8-bit sRGB, width*height*3 bytes.
+    Raw,
+}
+
+impl From<Encoding> for FrameEncoding {
+    fn from(e: Encoding) -> Self {
+        match e {
+            Encoding::Qoi => FrameEncoding::Qoi,
+            Encoding::Png => FrameEncoding::Png,
+            Encoding::Jpeg => FrameEncoding::Jpeg,
+            Encoding::Raw => FrameEncoding::RawRgb8,
+        }
+    }
+}
+
+fn parse_shader_param(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("expected KEY=VALUE, got '{s}'"))?;
+    let k = k.trim();
+    if k.is_empty() {
+        return Err(format!("empty parameter name in '{s}'"));
+    }
+    let v: f64 = v.trim().parse().map_err(|_| format!("value of '{k}' must be a number, got '{}'", v.trim()))?;
+    if !v.is_finite() {
+        return Err(format!("value of '{k}' must be finite, got {v}"));
+    }
+    Ok((k.to_string(), v))
+}
+
+fn parse_positive_f64(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !v.is_finite() || v <= 0.0 {
+        return Err(format!("must be a positive number, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_finite_f32(s: &str) -> Result<f32, String> {
+    let v: f32 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !v.is_finite() {
+        return Err(format!("must be a finite number, got {s}"));
+    }
+    Ok(v)
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .init();
+    match run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Everything that owns resources lives in here, so the local cluster is dropped (its
+/// children killed) before the process exits, whatever the outcome.
+fn run(args: Args) -> Result<()> {
+    // Read the scene before starting anything: a wrong path fails at once.
+    let scene = scene_source_from_arg(&args.scene)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+
+    // Ctrl-C only sets a flag: the run loops notice it and return normally, so the
+    // cluster's Drop runs. The children sit in their own process group, so a terminal's
+    // Ctrl-C reaches only us.
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stop_flag = Arc::new(AtomicBool::new(false));
+    {
+        let stop_flag = stop_flag.clone();
+        rt.spawn(async move {
+            if tokio::signal::ctrl_c().await.is_ok() {
+                tracing::info!("Ctrl-C: stopping");
+                stop_flag.store(true, Ordering::Relaxed);
+                let _ = stop_tx.send(true);
+            }
+        });
+    }
+
+    let cluster = match &args.server {
+        Some(_) => None,
+        None => {
+            let opts = LocalOptions {
+                workers: args.workers as usize,
+                worker_threads: args.worker_threads.map(|t| t as usize),
+                server_args: args.server_arg.clone(),
+                bin_dir: args.bin_dir.clone(),
+                log_level: args.cluster_log.clone(),
+                log_file: args.cluster_log_file.clone(),
+                ..LocalOptions::default()
+            };
+            Some(LocalCluster::start(opts).context("starting the local cluster")?)
+        }
+    };
+    if stop_flag.load(Ordering::Relaxed) {
+        return Ok(());
+    }
+    let url = match (&args.server, &cluster) {
+        (Some(u), _) => u.clone(),
+        (None, Some(c)) => c.server_url(),
+        (None, None) => unreachable!("a cluster is started whenever --server is absent"),
+    };
+
+    let settings = (args.sparseness.is_some() || args.max_fps.is_some()).then(|| pb::Settings {
+        sparseness: args.sparseness.unwrap_or(0.0),
+        max_fps: args.max_fps.unwrap_or(0.0),
+        ..Default::default()
+    });
+    let start = pb::Start {
+        scene: Some(scene),
+        width: args.width,
+        height: args.height,
+        shader: args.shader.clone(),
+        shader_params: args.shader_param.iter().cloned().collect(),
+        encoding: FrameEncoding::from(args.encoding) as i32,
+        settings,
+        camera: None,
+    };
+    tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
+    let connected = rt.block_on(async {
+        let mut stop = stop_rx.clone();
+        tokio::select! {
+            r = SessionClient::connect(&url, start) => Some(r),
+            _ = stop.wait_for(|s| *s) => None,
+        }
+    });
+    let Some(connected) = connected else { return Ok(()) };
+    // No context here: the message is the server's own (`INVALID_ARGUMENT: bunny.ply: ...`).
+    let (client, started) = connected?;
+    let names: Vec<&str> = started.objects.iter().map(|o| o.name.as_str()).collect();
+    tracing::info!(
+        session = %started.session_id,
+        workers = started.workers,
+        lights = started.lights,
+        objects = %names.join(", "),
+        "session started"
+    );
+    let script = Script::new(&started, args.orbit.then_some(args.orbit_speed), args.move_object.as_deref())?;
+
+    let want_window = !args.headless && display_available();
+    let window = if want_window {
+        match ViewerWindow::open("edgepoint-viewer", args.width, args.height) {
+            Ok(w) => Some(w),
+            Err(e) => {
+                tracing::warn!("{e:#}; running headless");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let result = match window {
+        Some(w) => run_window(&rt, w, client, script, &args, stop_flag),
+        None => {
+            let out = args.out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUT_DIR));
+            rt.block_on(run_headless(client, script, &args, out, stop_rx))
+        }
+    };
+    drop(cluster);
+    result
+}
+
+/// Sends what the script asks for after a frame; a send can only fail once the session is
+/// ending, and the receive side reports why.
+fn send_step(sender: &SessionSender, step: ScriptStep) {
+    if let Some(c) = step.camera {
+        let _ = sender.send_camera(c);
+    }
+    if let Some(m) = step.object_move {
+        let _ = sender.send_move(m);
+    }
+}
+
+fn log_rejected(r: &pb::Rejected) {
+    let code = code_name(tonic::Code::from_i32(r.code));
+    tracing::warn!("the server rejected a message: {code}: {}", r.message);
+}
+
+fn session_ended_early(count: u64, target: u64) -> Result<()> {
+    if target > 0 && count < target {
+        bail!("the server ended the session after {count} of {target} frames");
+    }
+    Ok(())
+}
+
+async fn run_headless(
+    mut client: SessionClient,
+    mut script: Script,
+    args: &Args,
+    out: PathBuf,
+    mut stop: watch::Receiver<bool>,
+) -> Result<()> {
+    let mut writer = HeadlessWriter::create(&out, !args.quiet)?;
+    tracing::info!("writing frames and stats.jsonl to {}", out.display());
+    let sender = client.sender();
+    loop {
+        let ev = tokio::select! {
+            ev = client.next_event() => ev,
+            _ = stop.wait_for(|s| *s) => break,
+        };
+        let received = Instant::now();
+        match ev {
+            None => {
+                session_ended_early(writer.frames_written(), args.frames)?;
+                break;
+            }
+            Some(Err(e)) => return Err(e.into()),
+            Some(Ok(Event::Rejected(r))) => log_rejected(&r),
+            Some(Ok(Event::Frame(f))) => {
+                writer.write_frame(&f, received)?;
+                if args.frames > 0 && writer.frames_written() >= args.frames {
+                    break;
+                }
+                send_step(&sender, script.on_frame());
+            }
+        }
+    }
+    tracing::info!("wrote {} frames to {}", writer.frames_written(), out.display());
+    Ok(())
+}
+
+fn run_window(
+    rt: &tokio::runtime::Runtime,
+    window: ViewerWindow,
+    mut client: SessionClient,
+    script: Script,
+    args: &Args,
+    stop: Arc<AtomicBool>,
+) -> Result<()> {
+    let mut writer = match &args.out {
+        Some(dir) => Some(HeadlessWriter::create(dir, !args.quiet)?),
+        None => None,
+    };
+    let sender = client.sender();
+    let script = Arc::new(Mutex::new(script));
+    // A short queue: the window shows only the newest frame, so a full queue means the
+    // window is busy and dropping a frame loses nothing.
+    let (frames_tx, frames_rx) = std::sync::mpsc::sync_channel::<ShownFrame>(4);
+    let target = args.frames;
+    let receiver = {
+        let script = script.clone();
+        let sender = sender.clone();
+        rt.spawn(async move {
+            let mut meter = FrameMeter::new();
+            while let Some(ev) = client.next_event().await {
+                let received = Instant::now();
+                match ev? {
+                    Event::Rejected(r) => log_rejected(&r),
+                    Event::Frame(f) => {
+                        let t0 = Instant::now();
+                        let img = decode_frame(&f)?;
+                        let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+                        let fps = match writer.as_mut() {
+                            Some(w) => w.write_decoded(&f, &img, received, decode_ms)?.fps,
+                            None => meter.arrive(received).fps,
+                        };
+                        let mut pixels = Vec::with_capacity(img.len() / 3);
+                        to_0rgb(&img, &mut pixels);
+                        let _ = frames_tx.try_send(ShownFrame {
+                            width: f.width,
+                            height: f.height,
+                            pixels,
+                            sequence: f.sequence,
+                            samples_used: f.samples_used,
+                            fps,
+                        });
+                        let count = writer.as_ref().map_or(meter.count(), |w| w.frames_written());
+                        if target > 0 && count >= target {
+                            return Ok(());
+                        }
+                        let step = script.lock().unwrap_or_else(|e| e.into_inner()).on_frame();
+                        send_step(&sender, step);
+                    }
+                }
+            }
+            let count = writer.as_ref().map_or(meter.count(), |w| w.frames_written());
+            session_ended_early(count, target)
+        })
+    };
+    let exit = window.run(frames_rx, &stop, |m| {
+        let mut s = script.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(rig) = s.rig_mut() {
+            rig.orbit(m.yaw);
+            rig.dolly(m.dolly);
+            let _ = sender.send_camera(camera_to_wire(&rig.camera()));
+        }
+    });
+    match exit {
+        WindowExit::FramesEnded => rt.block_on(receiver).context("the frame receiver panicked")?,
+        WindowExit::Closed | WindowExit::Stopped => {
+            receiver.abort();
+            Ok(())
+        }
+    }
+}
