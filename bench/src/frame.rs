@@ -188,7 +188,6 @@ pub fn run(args: FrameArgs) -> Result<()> {
         let mut last: Option<pb::Frame> = None;
         let mut first_at: Option<Instant> = None;
         let mut dropped = 0u64;
-        let mut classes = (0u64, 0u64, 0u64);
         while (totals.len() as u32) < args.frames {
             let ev = tokio::time::timeout(Duration::from_secs(60), client.next_event())
                 .await
@@ -208,11 +207,6 @@ pub fn run(args: FrameArgs) -> Result<()> {
                     totals.push(f.total_ms);
                     samples.push(f.samples_used as f64);
                     dropped = f.frames_dropped;
-                    if let Some(p) = &f.pixels {
-                        classes.0 += p.empty_class as u64;
-                        classes.1 += p.simple_class as u64;
-                        classes.2 += p.complex_class as u64;
-                    }
                     last = Some(f);
                 }
             }

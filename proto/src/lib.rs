@@ -17,3 +17,5 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 
 mod source;
 pub use source::*;
+
+pub mod net;

@@ -8,7 +8,6 @@ use edgepoint_server::workers::{PoolOptions, WorkerPool};
 use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
-use tokio_stream::wrappers::TcpListenerStream;
 
 /// The edgepoint renderer: edge-and-point rendering sessions over gRPC, shading on remote
 /// shader workers.
@@ -107,7 +106,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
     let server = tonic::transport::Server::builder()
         .add_service(health_service)
         .add_service(service.into_server(max_message))
-        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), async {
             let _ = stop_rx.await;
         });
     let mut server = std::pin::pin!(server);

@@ -261,7 +261,13 @@ impl Renderer for RendererService {
         let out_in = output.clone();
         tokio::spawn(async move {
             loop {
-                match inbound.message().await {
+                // Stop reading when the session ends, so the request stream is released
+                // and the connection can drain (graceful shutdown).
+                let msg = tokio::select! {
+                    m = inbound.message() => m,
+                    _ = out_in.done() => break,
+                };
+                match msg {
                     Ok(Some(pb::ViewerMsg { msg })) => {
                         let input = match msg {
                             Some(ViewerIn::Camera(c)) => Input::Camera(c),

@@ -16,13 +16,12 @@ fn help_documents_every_flag() {
     let out = Command::new(server_bin()).arg("--help").output().unwrap();
     assert!(out.status.success());
     let help = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = help.lines().collect();
     for flag in ["--listen", "--worker", "--max-sessions", "--max-message-mib", "--points-per-pixel"] {
-        let line = help.lines().find(|l| l.trim_start().starts_with(flag)).unwrap_or_else(|| panic!("{flag} missing"));
-        // clap puts the doc on the same line or the next ones; make sure there is text.
-        let idx = help.find(line).unwrap();
-        let after = &help[idx + line.len()..];
-        let doc = format!("{line}{}", after.lines().next().unwrap_or(""));
-        assert!(doc.split_whitespace().count() > 3, "{flag} undocumented: {doc}");
+        let i = lines.iter().position(|l| l.trim_start().starts_with(flag)).unwrap_or_else(|| panic!("{flag} missing"));
+        // clap puts the doc on the same line (short help) or the next one (long help).
+        let doc = format!("{} {}", lines[i], lines.get(i + 1).unwrap_or(&""));
+        assert!(doc.split_whitespace().count() > 5, "{flag} undocumented: {doc}");
     }
     let bad = Command::new(server_bin()).args(["--worker", "http://", "--listen", "127.0.0.1:0"]).output().unwrap();
     assert!(!bad.status.success(), "a bad worker address is an error");

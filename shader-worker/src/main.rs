@@ -4,7 +4,6 @@ use clap::Parser;
 use edgepoint_proto::shader_worker_server::ShaderWorkerServer;
 use edgepoint_worker::service::WorkerService;
 use std::io::Write;
-use tokio_stream::wrappers::TcpListenerStream;
 
 #[derive(Parser, Debug)]
 #[command(name = "edgepoint-worker", version, about = "edgepoint shader worker: shades batches of ray requests for the renderer over gRPC")]
@@ -51,7 +50,7 @@ async fn main() -> anyhow::Result<()> {
         .http2_keepalive_interval(Some(std::time::Duration::from_secs(10)))
         .add_service(health_service)
         .add_service(ShaderWorkerServer::new(service).max_decoding_message_size(max).max_encoding_message_size(max))
-        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), shutdown())
+        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), shutdown())
         .await?;
     tracing::info!("edgepoint-worker stopped");
     Ok(())

@@ -418,17 +418,46 @@ impl LogSink {
     }
 
     fn write_line(&self, prefix: &str, line: &str) {
+        use std::io::IsTerminal;
         match self {
             LogSink::Stderr => {
                 let mut e = std::io::stderr().lock();
-                let _ = writeln!(e, "{prefix}{line}");
+                if e.is_terminal() {
+                    let _ = writeln!(e, "{prefix}{line}");
+                } else {
+                    let _ = writeln!(e, "{prefix}{}", strip_ansi(line));
+                }
             }
             LogSink::File(f) => {
                 let mut f = f.lock().unwrap_or_else(|e| e.into_inner());
-                let _ = writeln!(f, "{prefix}{line}");
+                let _ = writeln!(f, "{prefix}{}", strip_ansi(line));
             }
         }
     }
+}
+
+/// Removes ANSI escape sequences (CSI `ESC [ ... final`): children colour their logs even
+/// into a pipe, and colour codes are noise in a file or a CI log.
+fn strip_ansi(line: &str) -> std::borrow::Cow<'_, str> {
+    if !line.contains('\x1b') {
+        return std::borrow::Cow::Borrowed(line);
+    }
+    let mut out = String::with_capacity(line.len());
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\x1b' && chars.peek() == Some(&'[') {
+            chars.next();
+            // Parameter and intermediate bytes, then one final byte in '@'..='~'.
+            for d in chars.by_ref() {
+                if ('@'..='~').contains(&d) {
+                    break;
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }
 
 /// A thread that lives as long as the cluster and forks every child.
@@ -560,5 +589,18 @@ fn is_executable(p: &Path) -> bool {
     #[cfg(not(unix))]
     {
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::strip_ansi;
+
+    #[test]
+    fn strips_colour_codes_only() {
+        let coloured = "\x1b[2m2026-11-23T04:02:07Z\x1b[0m \x1b[32m INFO\x1b[0m edgepoint: serving \x1b[3maddr\x1b[0m\x1b[2m=\x1b[0m1.2.3.4:5";
+        assert_eq!(strip_ansi(coloured), "2026-11-23T04:02:07Z  INFO edgepoint: serving addr=1.2.3.4:5");
+        assert_eq!(strip_ansi("plain [text] here"), "plain [text] here");
+        assert_eq!(strip_ansi("cut \x1b[3"), "cut ");
     }
 }

@@ -26,9 +26,10 @@ const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
 ///
 /// Without --server, starts a local cluster: --workers shader workers and one server, as
 /// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
-/// without --headless, frames show in a window (arrows / A-D orbit, W/S dolly, Esc quits);
-/// otherwise each frame is written as OUT/frame_00001.png with one JSON line of stats per
-/// frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
+/// without --headless, frames show in a window (Left/Right or A/D orbit, W/S or Up/Down
+/// dolly, Esc quits); otherwise each frame is written as OUT/frame_00001.png with one JSON
+/// line of stats per frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
+/// Logs go to stderr, filtered by RUST_LOG (default info). Ctrl-C ends the run cleanly.
 #[derive(Debug, Parser)]
 #[command(name = "edgepoint-viewer", version)]
 struct Args {

@@ -1,7 +1,7 @@
 //! The on-screen viewer window (minifb): shows each frame as it arrives, with fps and
-//! samples per frame in the title; arrows / A-D orbit, W/S dolly, Esc quits. minifb loads
-//! X11 / Wayland at run time, so opening fails cleanly without a display and the caller
-//! falls back to headless output.
+//! samples per frame in the title; Left/Right or A/D orbit, W/S or Up/Down dolly, Esc
+//! quits. minifb loads X11 / Wayland at run time, so opening fails cleanly without a
+//! display and the caller falls back to headless output.
 use anyhow::{anyhow, Result};
 use minifb::{Key, ScaleMode, Window, WindowOptions};
 use std::sync::atomic::{AtomicBool, Ordering};

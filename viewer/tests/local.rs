@@ -139,3 +139,16 @@ fn find_binary_searches_the_given_dir_first_and_explains_failure() {
     let err = find_binary("edgepoint-no-such-binary").unwrap_err().to_string();
     assert!(err.contains(&exe_dir.display().to_string()) && err.contains(&exe_dir.parent().unwrap().display().to_string()), "{err}");
 }
+
+#[test]
+fn a_log_file_collects_the_childrens_stderr() {
+    let dir = tempfile::tempdir().unwrap();
+    fake_bin_dir(dir.path(), fake_server_addr());
+    let log = dir.path().join("cluster.log");
+    let c = LocalCluster::start(LocalOptions { log_file: Some(log.clone()), ..opts(dir.path(), 2) }).unwrap();
+    let addrs = c.worker_addrs();
+    assert!(eventually(5, || {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        (0..2).all(|i| text.contains(&format!("[edgepoint-worker #{i}] worker starting on {}", addrs[i])))
+    }));
+}

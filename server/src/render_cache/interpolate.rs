@@ -5,7 +5,7 @@
 //! weight sum is kept per pixel: prioritized sampling (§5.3) gives low sums high priority.
 //! A pixel with its own point shows that point's colour unfiltered and keeps the point's
 //! own kernel weight.
-use super::{RenderCache, NO_POINT};
+use super::{PointImage, RenderCache, NO_POINT};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -33,8 +33,12 @@ fn kernel_table() -> &'static [f32] {
 
 #[inline]
 fn k1(table: &[f32], o: f32) -> f32 {
-    let i = ((o + HALF_RANGE) * STEPS + 0.5) as usize;
-    table[i.min(table.len() - 1)]
+    // Offsets are within [-HALF_RANGE, HALF_RANGE] by construction (|dx| <= 2, subpixel in
+    // [0, 1)); the clamp keeps the index in the table whatever comes in, NaN included.
+    let f = ((o + HALF_RANGE) * STEPS + 0.5).clamp(0.0, 2.0 * HALF_RANGE * STEPS);
+    let f = if f.is_nan() { 0.0 } else { f };
+    // SAFETY: f is finite and in [0, table.len() - 1] after the clamp and NaN check.
+    table[unsafe { f.to_int_unchecked::<usize>() }]
 }
 
 impl RenderCache {
@@ -45,65 +49,73 @@ impl RenderCache {
         if w == 0 || h == 0 {
             return (0, 0, 0);
         }
-        let pi = &self.points;
-        let bg = self.cfg.background;
-        let table = kernel_table();
-        // Weighted sum over the points at offsets dx, dy in [-r, r] with r0 <= max(|dx|,|dy|).
-        let gather = |x: usize, y: usize, r0: usize, r: usize| -> (Vec3, f32) {
-            let (mut c, mut ws) = (Vec3::ZERO, 0.0f32);
-            let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
-            let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
-            for ny in y0..=y1 {
-                let dy = ny as f32 - y as f32;
-                let inner_row = ny.abs_diff(y) < r0;
-                for nx in x0..=x1 {
-                    if inner_row && nx.abs_diff(x) < r0 {
-                        continue;
-                    }
-                    let j = ny * w + nx;
-                    if pi.point[j] == NO_POINT {
-                        continue;
-                    }
-                    let [u, v] = pi.subpixel[j];
-                    let wt = k1(table, nx as f32 - x as f32 + u - 0.5) * k1(table, dy + v - 0.5);
-                    c += pi.color[j] * wt;
-                    ws += wt;
-                }
-            }
-            (c, ws)
-        };
+        let (pi, bg) = (&self.points, self.cfg.background);
         (self.image.par_chunks_mut(w), self.weights.par_chunks_mut(w))
             .into_par_iter()
             .enumerate()
-            .map(|(y, (img, wt))| {
-                let (mut with_point, mut filled, mut empty) = (0u32, 0u32, 0u32);
-                for x in 0..w {
-                    let i = y * w + x;
-                    if pi.point[i] != NO_POINT {
-                        // A pixel's own point is shown as shaded, with its own kernel weight
-                        // (sampling ranks such pixels by the point's age).
-                        img[x] = pi.color[i];
-                        let [u, v] = pi.subpixel[i];
-                        wt[x] = k1(table, u - 0.5) * k1(table, v - 0.5);
-                        with_point += 1;
-                        continue;
-                    }
-                    let (mut c, mut ws) = gather(x, y, 0, 1);
-                    if ws == 0.0 {
-                        (c, ws) = gather(x, y, 2, 2);
-                    }
-                    if ws > 0.0 {
-                        img[x] = c / ws;
-                        wt[x] = ws;
-                        filled += 1;
-                    } else {
-                        img[x] = bg;
-                        wt[x] = 0.0;
-                        empty += 1;
-                    }
-                }
-                (with_point, filled, empty)
-            })
+            .map(|(y, (img, wt))| interpolate_row(pi, bg, y, img, wt))
             .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
     }
+}
+
+/// Weighted sum of the colours of the points at offsets (dx, dy), `r0 <= max(|dx|, |dy|) <= r`,
+/// around pixel (x, y), and the sum of the weights.
+#[inline]
+fn gather(pi: &PointImage, table: &[f32], x: usize, y: usize, r0: usize, r: usize) -> (Vec3, f32) {
+    let (w, h) = (pi.width as usize, pi.height as usize);
+    let (mut c, mut ws) = (Vec3::ZERO, 0.0f32);
+    let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+    let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+    for ny in y0..=y1 {
+        let dy = ny as f32 - y as f32;
+        let inner_row = ny.abs_diff(y) < r0;
+        for nx in x0..=x1 {
+            if inner_row && nx.abs_diff(x) < r0 {
+                continue;
+            }
+            let j = ny * w + nx;
+            if pi.point[j] == NO_POINT {
+                continue;
+            }
+            let [u, v] = pi.subpixel[j];
+            let wt = k1(table, nx as f32 - x as f32 + u - 0.5) * k1(table, dy + v - 0.5);
+            c += pi.color[j] * wt;
+            ws += wt;
+        }
+    }
+    (c, ws)
+}
+
+/// Fills row `y` of the image and the weights. Returns (pixels with a point, filled, empty).
+#[inline(never)]
+fn interpolate_row(pi: &PointImage, bg: Vec3, y: usize, img: &mut [Vec3], wt: &mut [f32]) -> (u32, u32, u32) {
+    let table = kernel_table();
+    let w = img.len();
+    let (mut with_point, mut filled, mut empty) = (0u32, 0u32, 0u32);
+    for x in 0..w {
+        let i = y * w + x;
+        if pi.point[i] != NO_POINT {
+            // A pixel's own point is shown as shaded, with its own kernel weight (sampling
+            // ranks such pixels by the point's age).
+            img[x] = pi.color[i];
+            let [u, v] = pi.subpixel[i];
+            wt[x] = k1(table, u - 0.5) * k1(table, v - 0.5);
+            with_point += 1;
+            continue;
+        }
+        let (mut c, mut ws) = gather(pi, table, x, y, 0, 1);
+        if ws == 0.0 {
+            (c, ws) = gather(pi, table, x, y, 2, 2);
+        }
+        if ws > 0.0 {
+            img[x] = c / ws;
+            wt[x] = ws;
+            filled += 1;
+        } else {
+            img[x] = bg;
+            wt[x] = 0.0;
+            empty += 1;
+        }
+    }
+    (with_point, filled, empty)
 }

@@ -29,6 +29,9 @@ pub const STAGE_REPROJECT: &str = "reproject";
 /// Name of the gap-filling interpolation stage.
 pub const STAGE_INTERPOLATE: &str = "interpolate";
 
+/// Slots an insert examines for a hidden point before it takes the oldest.
+const HIDDEN_SCAN: u32 = 16;
+
 /// Image rows per pool region (see the module doc).
 pub const BAND_ROWS: u32 = 8;
 
@@ -154,23 +157,22 @@ pub(crate) struct Shade {
     pub born: u32,
 }
 
-/// Where a point projected in the last frame, with the shading the point image copies from
-/// it: one aligned 32-byte record, so that building the point image costs one random memory
-/// access per pixel (points sit in the pool in replacement order, not in pixel order).
+/// Where a point projected in the last frame: what replacement needs to tell whether it was
+/// hidden, and its position inside the pixel for the point image. Kept small (12 bytes):
+/// pass 1 writes one per point every frame.
 #[derive(Debug, Clone, Copy)]
-#[repr(C, align(32))]
+#[repr(C)]
 pub(crate) struct Projected {
     /// Pixel index, or `NO_POINT` when off-screen, behind the eye, or invalid.
     pub pixel: u32,
     pub depth: f32,
-    pub sx: f32,
-    pub sy: f32,
-    pub shade: Shade,
+    /// Position inside the pixel in units of 1/65536.
+    pub fx: u16,
+    pub fy: u16,
 }
 
 impl Projected {
-    pub(crate) const NONE: Projected =
-        Projected { pixel: NO_POINT, depth: f32::INFINITY, sx: 0.0, sy: 0.0, shade: Shade { color: Vec3::ZERO, born: 0 } };
+    pub(crate) const NONE: Projected = Projected { pixel: NO_POINT, depth: f32::INFINITY, fx: 0, fy: 0 };
 }
 
 /// The cached points, structure of arrays so each pass streams only what it reads.
@@ -194,7 +196,7 @@ struct Region {
     free: Vec<u32>,
     /// (stamp, slot) in insertion order; entries whose slot was reused since are skipped.
     oldest: VecDeque<(u64, u32)>,
-    /// Scan position for hidden points to replace within the current frame.
+    /// Clock hand of the scan for hidden points (wraps around the region).
     hidden_cursor: u32,
 }
 
@@ -222,8 +224,9 @@ pub struct RenderCache {
     /// Per pixel: (depth bits << 32 | point index), minimum wins; one buffer per worker
     /// share of the points, merged into the first.
     zbufs: Vec<Vec<u64>>,
-    /// Per pixel: depth of the nearest point, NaN where none (for the culling test).
-    zdepth: Vec<f32>,
+    /// Per pixel: nearest depth (as `f32` bits, all ones for none) over the pixel and its
+    /// left and right neighbours — the culling pre-test.
+    zmin_row: Vec<u32>,
     /// Per point: where it projected in the last frame.
     proj: Vec<Projected>,
     points: PointImage,
@@ -272,7 +275,7 @@ impl RenderCache {
             next_stamp: 0,
             frame: 0,
             zbufs: vec![vec![EMPTY_KEY; pixels]],
-            zdepth: vec![f32::NAN; pixels],
+            zmin_row: vec![u32::MAX; pixels],
             proj: vec![Projected::NONE; capacity],
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],
@@ -286,7 +289,10 @@ impl RenderCache {
 
     /// Stores a sample in the fixed pool, in the region of its pixel's row band, replacing (in
     /// this order) an invalid slot, a point that was hidden in the last frame, or the oldest
-    /// point. A pixel row beyond the image counts as the last row. Returns `false` (and stores
+    /// point. Hidden points are looked for with a clock hand that examines a bounded number
+    /// of slots per insert, so when hidden points are rare an insert may take the oldest
+    /// point although a hidden one exists elsewhere in the region. A pixel row beyond the
+    /// image counts as the last row. Returns `false` (and stores
     /// nothing) for a sample with non-finite position or colour, a miss whose direction is
     /// zero, or a cache of capacity 0.
     pub fn insert(&mut self, s: &Sample) -> bool {
@@ -321,15 +327,21 @@ impl RenderCache {
         true
     }
 
-    /// A slot of region `band`: invalid, else hidden in the last frame, else the oldest.
+    /// A slot of region `band`: invalid, else hidden in the last frame (among the next
+    /// `HIDDEN_SCAN` slots of a clock-hand scan), else the oldest.
     fn take_slot(&mut self, band: usize) -> Option<u32> {
         if let Some(slot) = self.regions[band].free.pop() {
             return Some(slot);
         }
-        let end = self.regions[band].end;
-        while self.regions[band].hidden_cursor < end {
-            let i = self.regions[band].hidden_cursor;
-            self.regions[band].hidden_cursor += 1;
+        // Look at a bounded number of slots per insert, continuing round the region where
+        // the last look stopped, so an insert costs O(1) even when few points are hidden.
+        let (start, end) = (self.regions[band].start, self.regions[band].end);
+        for _ in 0..HIDDEN_SCAN.min(end - start) {
+            let mut i = self.regions[band].hidden_cursor;
+            if i >= end {
+                i = start;
+            }
+            self.regions[band].hidden_cursor = i + 1;
             if self.pool.flags[i as usize] & FLAG_VALID != 0 && self.was_hidden(i as usize) {
                 return Some(i);
             }
@@ -468,9 +480,6 @@ impl RenderCache {
         cam.width = self.cfg.width;
         cam.height = self.cfg.height;
         cam.aspect = self.cfg.width as f32 / self.cfg.height.max(1) as f32;
-        for r in &mut self.regions {
-            r.hidden_cursor = r.start;
-        }
         self.frame = self.frame.wrapping_add(1);
         let occluded = times.time(STAGE_REPROJECT, || self.reproject(&cam));
         let (with_point, filled, empty) = times.time(STAGE_INTERPOLATE, || self.interpolate());

@@ -5,39 +5,76 @@
 //! rows merges them. A depth-buffer entry is `(depth bits << 32) | point index`, the
 //! minimum wins: positive `f32` bit patterns order like the floats, a point at infinity (a
 //! miss) is behind every hit, and equal depths go to the lower index.
-use super::{Projected, RenderCache, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_VALID, NO_POINT};
+use super::{Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_VALID, NO_POINT};
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Projects a cached point: a hit is a world position, a miss a direction (a point at
-/// infinity, view depth `+inf`). Returns continuous pixel coordinates and view depth, or
-/// `None` behind the eye. Hits use exactly `CameraFrame::project`.
-#[inline]
-pub(crate) fn project_point(cam: &CameraFrame, p: Vec3, hit: bool) -> Option<(f32, f32, f32)> {
-    if hit {
-        return cam.project(p);
-    }
-    let z = p.dot(cam.forward);
-    if z <= 1e-6 {
-        return None;
-    }
-    let x = p.dot(cam.right) / (z * cam.tan_half_y * cam.aspect);
-    let y = p.dot(cam.up) / (z * cam.tan_half_y);
-    Some(((x + 1.0) * 0.5 * cam.width as f32, (1.0 - y) * 0.5 * cam.height as f32, f32::INFINITY))
+/// The camera prepared for projecting many points: the image-plane axes pre-scaled to pixels,
+/// so a point costs three dot products and one division.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Projector {
+    eye: Vec3,
+    rx: Vec3,
+    uy: Vec3,
+    f: Vec3,
+    cx: f32,
+    cy: f32,
+    width: u32,
+    height: u32,
+    wf: f32,
+    hf: f32,
 }
 
-/// The pixel containing continuous image position (`sx`, `sy`), if inside the image.
-#[inline]
-pub(crate) fn pixel_of(sx: f32, sy: f32, width: u32, height: u32) -> Option<(u32, u32)> {
-    // Written so that NaN fails every comparison.
-    if sx >= 0.0 && sy >= 0.0 && sx < width as f32 && sy < height as f32 {
-        Some(((sx as u32).min(width - 1), (sy as u32).min(height - 1)))
-    } else {
-        None
+impl Projector {
+    pub(crate) fn new(cam: &CameraFrame) -> Self {
+        let cx = 0.5 * cam.width as f32;
+        let cy = 0.5 * cam.height as f32;
+        let rx = cam.right * (cx / (cam.tan_half_y * cam.aspect));
+        let uy = cam.up * (cy / cam.tan_half_y);
+        let f = cam.forward;
+        Self { eye: cam.eye, rx, uy, f, cx, cy, width: cam.width, height: cam.height, wf: cam.width as f32, hf: cam.height as f32 }
+    }
+
+    /// Projects a cached point: a hit is a world position, a miss a direction (a point at
+    /// infinity, view depth `+inf`). Returns continuous pixel coordinates and view depth, or
+    /// `None` behind (or too near) the eye. Agrees with `CameraFrame::project` up to
+    /// rounding.
+    #[inline]
+    pub(crate) fn project(&self, p: Vec3, hit: bool) -> Option<(f32, f32, f32)> {
+        let d = if hit { p - self.eye } else { p };
+        // Same expression as `CameraFrame::project`, so hit depths are identical.
+        let z = d.dot(self.f);
+        if z <= 1e-6 {
+            return None;
+        }
+        let inv = 1.0 / z;
+        let sx = self.cx + d.dot(self.rx) * inv;
+        let sy = self.cy - d.dot(self.uy) * inv;
+        Some((sx, sy, if hit { z } else { f32::INFINITY }))
+    }
+
+    /// The pixel containing continuous image position (`sx`, `sy`) and the position inside
+    /// it in units of 1/65536, if inside the image.
+    #[inline]
+    pub(crate) fn pixel_of(&self, sx: f32, sy: f32) -> Option<(u32, u32, u16, u16)> {
+        // Written so that NaN fails every comparison.
+        if sx >= 0.0 && sy >= 0.0 && sx < self.wf && sy < self.hf {
+            // SAFETY: both values are finite and in [0, 2^32) after the test above (image
+            // sizes are u32).
+            let (px, py) = unsafe { (sx.to_int_unchecked::<u32>(), sy.to_int_unchecked::<u32>()) };
+            let (px, py) = (px.min(self.width - 1), py.min(self.height - 1));
+            // SAFETY: s - p is finite and in [0, 1] here (p = floor(s), or s's pixel clamped
+            // into the image), so the value fits a u16 after the min.
+            let frac = |s: f32, p: u32| unsafe { ((s - p as f32) * 65536.0).min(65535.0).to_int_unchecked::<u16>() };
+            Some((px, py, frac(sx, px), frac(sy, py)))
+        } else {
+            None
+        }
     }
 }
 
+/// Depth of a depth-buffer entry; NaN for an empty one (all ones).
 #[inline]
 pub(crate) fn key_depth(key: u64) -> f32 {
     f32::from_bits((key >> 32) as u32)
@@ -58,19 +95,21 @@ const NEIGHBOURS: [(isize, isize); 8] = [(-1, 0), (-1, -1), (0, -1), (1, -1), (1
 ///   jittered sample positions alone change depth by more than the threshold), which the
 ///   point belongs to.
 ///
-/// `depth` is the depth image with NaN where a pixel has no point (NaN is neither nearer
-/// nor farther).
+/// `zbuf` is the merged depth buffer; an empty entry decodes to NaN, which is neither
+/// nearer nor farther.
 #[inline]
-pub(crate) fn is_occluded(depth: &[f32], w: usize, h: usize, x: usize, y: usize, dc: f32) -> bool {
+pub(crate) fn is_occluded(zbuf: &[u64], w: usize, h: usize, x: usize, y: usize, dc: f32) -> bool {
     let mut nb = [f32::NAN; 8];
     if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
         let i = y * w + x;
-        nb = [depth[i - 1], depth[i - w - 1], depth[i - w], depth[i - w + 1], depth[i + 1], depth[i + w + 1], depth[i + w], depth[i + w - 1]];
+        for (k, o) in [i - 1, i - w - 1, i - w, i - w + 1, i + 1, i + w + 1, i + w, i + w - 1].into_iter().enumerate() {
+            nb[k] = key_depth(zbuf[o]);
+        }
     } else {
         for (k, &(dx, dy)) in NEIGHBOURS.iter().enumerate() {
             let (nx, ny) = (x as isize + dx, y as isize + dy);
             if nx >= 0 && ny >= 0 && nx < w as isize && ny < h as isize {
-                nb[k] = depth[ny as usize * w + nx as usize];
+                nb[k] = key_depth(zbuf[ny as usize * w + nx as usize]);
             }
         }
     }
@@ -85,9 +124,6 @@ pub(crate) fn is_occluded(depth: &[f32], w: usize, h: usize, x: usize, y: usize,
     let bracket = ((near & (far >> 4)) | (far & (near >> 4))) & 0xF;
     sandwich != 0 && bracket == 0
 }
-
-/// Largest float below 1, so a subpixel coordinate stays inside [0, 1).
-const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 
 impl RenderCache {
     /// Projects every point, keeps the nearest per pixel, culls occluded ones and builds the
@@ -107,50 +143,32 @@ impl RenderCache {
         }
         let share = self.capacity.div_ceil(shares).max(1);
 
-        let tt = std::time::Instant::now();
         // Pass 1, over points: project, nearest per pixel into the share's depth buffer.
         let pool = &self.pool;
-        let (position, flags, shade) = (&pool.position, &pool.flags, &pool.shade);
+        let prj = Projector::new(cam);
         self.zbufs.par_iter_mut().for_each(|z| z.fill(EMPTY_KEY));
         self.zbufs.par_iter_mut().zip(self.proj.par_chunks_mut(share)).enumerate().for_each(|(k, (zbuf, proj))| {
             let base = k * share;
-            for (j, pr) in proj.iter_mut().enumerate() {
-                let i = base + j;
-                pr.pixel = NO_POINT;
-                let f = flags[i];
-                if f & FLAG_VALID == 0 {
-                    continue;
-                }
-                let Some((sx, sy, z)) = project_point(cam, position[i], f & FLAG_HIT != 0) else { continue };
-                let Some((px, py)) = pixel_of(sx, sy, w as u32, h as u32) else { continue };
-                let p = py as usize * w + px as usize;
-                *pr = Projected { pixel: p as u32, depth: z, sx, sy, shade: shade[i] };
-                let key = (u64::from(z.to_bits()) << 32) | i as u64;
-                if key < zbuf[p] {
-                    zbuf[p] = key;
-                }
-            }
+            let n = proj.len();
+            project_share(&prj, base, &pool.flags[base..base + n], &pool.position[base..base + n], proj, zbuf);
         });
 
-        let t1 = tt.elapsed();
-        // Merge the shares into zbufs[0] and decode the depth image (NaN: no point).
+        // Merge the shares into zbufs[0] and take the nearest depth over each pixel and its
+        // row neighbours.
         let (z0, rest) = self.zbufs.split_first_mut().expect("at least one depth buffer");
-        z0.par_chunks_mut(w).zip(self.zdepth.par_chunks_mut(w)).enumerate().for_each(|(y, (zrow, drow))| {
-            for other in rest.iter() {
-                for (a, b) in zrow.iter_mut().zip(&other[y * w..(y + 1) * w]) {
-                    *a = (*a).min(*b);
-                }
-            }
-            for (d, &key) in drow.iter_mut().zip(zrow.iter()) {
-                *d = if key == EMPTY_KEY { f32::NAN } else { key_depth(key) };
-            }
-        });
+        z0.par_chunks_mut(w).zip(self.zmin_row.par_chunks_mut(w)).enumerate().for_each(|(y, (zrow, mrow))| merge_row(rest, y, zrow, mrow));
 
-        let t2 = tt.elapsed();
         // Pass 2, over rows: depth culling against the 3x3 neighbourhood, then the point
-        // image. Two loops per row: the gathers of the second are independent of each other
-        // and short, so many of their cache misses overlap.
-        let (zbuf, zdepth, proj, frame) = (&self.zbufs[0], &self.zdepth, &self.proj, self.frame);
+        // image.
+        let ctx = RowContext {
+            zbuf: &self.zbufs[0],
+            zmin_row: &self.zmin_row,
+            proj: &self.proj,
+            shade: &pool.shade,
+            frame: self.frame,
+            w,
+            h,
+        };
         let pi = &mut self.points;
         (
             pi.point.par_chunks_mut(w),
@@ -161,38 +179,105 @@ impl RenderCache {
         )
             .into_par_iter()
             .enumerate()
-            .map(|(y, (pt, dp, sp, col, ag))| {
-                let mut culled = 0u32;
-                let row = &zbuf[y * w..(y + 1) * w];
-                for (x, &key) in row.iter().enumerate() {
-                    pt[x] = NO_POINT;
-                    dp[x] = f32::INFINITY;
-                    if key == EMPTY_KEY {
-                        continue;
-                    }
-                    let dc = key_depth(key);
-                    if is_occluded(zdepth, w, h, x, y, dc) {
-                        culled += 1;
-                        continue;
-                    }
-                    pt[x] = key as u32;
-                    dp[x] = dc;
-                }
-                for x in 0..w {
-                    let idx = pt[x];
-                    if idx == NO_POINT {
-                        sp[x] = [0.0; 2];
-                        col[x] = Vec3::ZERO;
-                        ag[x] = f32::INFINITY;
-                        continue;
-                    }
-                    let pr = &proj[idx as usize];
-                    sp[x] = [(pr.sx - x as f32).clamp(0.0, BELOW_ONE), (pr.sy - y as f32).clamp(0.0, BELOW_ONE)];
-                    col[x] = pr.shade.color;
-                    ag[x] = RenderCache::age_of(frame, pr.shade.born);
-                }
-                culled
-            })
-            .sum::<u32>().max({ if std::env::var("RC_DEBUG").is_ok() { eprintln!("p1 {:?} merge {:?} p2 {:?}", t1, t2 - t1, tt.elapsed() - t2); } 0 })
+            .map(|(y, (pt, dp, sp, col, ag))| build_row(&ctx, y, pt, dp, sp, col, ag))
+            .sum()
     }
+}
+
+/// Pass 1 for one share of the points (slots `base..`): project each valid point, record
+/// where it went, keep the nearest per pixel in `zbuf`.
+#[inline(never)]
+fn project_share(prj: &Projector, base: usize, flags: &[u8], position: &[Vec3], proj: &mut [Projected], zbuf: &mut [u64]) {
+    let w = prj.width as usize;
+    for (j, ((pr, &f), &pos)) in proj.iter_mut().zip(flags).zip(position).enumerate() {
+        pr.pixel = NO_POINT;
+        if f & FLAG_VALID == 0 {
+            continue;
+        }
+        let Some((sx, sy, z)) = prj.project(pos, f & FLAG_HIT != 0) else { continue };
+        let Some((px, py, fx, fy)) = prj.pixel_of(sx, sy) else { continue };
+        let p = py as usize * w + px as usize;
+        *pr = Projected { pixel: p as u32, depth: z, fx, fy };
+        let key = (u64::from(z.to_bits()) << 32) | (base + j) as u64;
+        if key < zbuf[p] {
+            zbuf[p] = key;
+        }
+    }
+}
+
+/// Merges row `y` of the other shares' depth buffers into `zrow` and writes into `mrow` the
+/// nearest depth over each pixel and its row neighbours, as `f32` bits: positive floats
+/// order like their bits, and an empty entry (all ones) is above every depth, so an integer
+/// minimum needs no NaN handling.
+#[inline(never)]
+fn merge_row(rest: &[Vec<u64>], y: usize, zrow: &mut [u64], mrow: &mut [u32]) {
+    let w = zrow.len();
+    for other in rest {
+        for (a, b) in zrow.iter_mut().zip(&other[y * w..(y + 1) * w]) {
+            *a = (*a).min(*b);
+        }
+    }
+    let bits = |x: usize| (zrow[x] >> 32) as u32;
+    for x in 0..w {
+        mrow[x] = bits(x.saturating_sub(1)).min(bits(x)).min(bits((x + 1).min(w - 1)));
+    }
+}
+
+/// What pass 2 reads.
+struct RowContext<'a> {
+    zbuf: &'a [u64],
+    zmin_row: &'a [u32],
+    proj: &'a [Projected],
+    shade: &'a [Shade],
+    frame: u32,
+    w: usize,
+    h: usize,
+}
+
+/// Pass 2 for row `y`: culls occluded points and writes the row of the point image. Returns
+/// the number of culled points. Two loops: the gathers of the second are independent of
+/// each other and short, so many of their cache misses overlap (pool regions keep them
+/// local).
+#[inline(never)]
+fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32]) -> u32 {
+    let (w, h) = (c.w, c.h);
+    let t = 1.0 + DEPTH_CULL_RELATIVE;
+    let mut culled = 0u32;
+    let row = &c.zbuf[y * w..(y + 1) * w];
+    let m_above = &c.zmin_row[y.saturating_sub(1) * w..][..w];
+    let m_here = &c.zmin_row[y * w..][..w];
+    let m_below = &c.zmin_row[(y + 1).min(h - 1) * w..][..w];
+    for (x, &key) in row.iter().enumerate() {
+        pt[x] = NO_POINT;
+        dp[x] = f32::INFINITY;
+        if key == EMPTY_KEY {
+            continue;
+        }
+        let dc = key_depth(key);
+        // Cheap pre-test: without any neighbour nearer by the threshold the point cannot be
+        // occluded (most pixels stop here).
+        let nearest = f32::from_bits(m_above[x].min(m_here[x]).min(m_below[x]));
+        if nearest * t < dc && is_occluded(c.zbuf, w, h, x, y, dc) {
+            culled += 1;
+            continue;
+        }
+        pt[x] = key as u32;
+        dp[x] = dc;
+    }
+    for x in 0..w {
+        let idx = pt[x];
+        if idx == NO_POINT {
+            sp[x] = [0.0; 2];
+            col[x] = Vec3::ZERO;
+            ag[x] = f32::INFINITY;
+            continue;
+        }
+        let i = idx as usize;
+        let pr = c.proj[i];
+        sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
+        let sh = c.shade[i];
+        col[x] = sh.color;
+        ag[x] = RenderCache::age_of(c.frame, sh.born);
+    }
+    culled
 }

@@ -1,5 +1,6 @@
 //! Tests of the Render Cache against brute-force oracles on random cases.
 use super::interpolate::INTERP_SIGMA;
+use super::reproject::Projector;
 use super::*;
 use crate::stage_times::StageTimes;
 use edgepoint_scene::camera::{Camera, CameraFrame};
@@ -54,25 +55,46 @@ fn frame(c: &mut RenderCache, cam: &CameraFrame) -> FrameCounts {
     c.reproject_and_interpolate(cam, &mut StageTimes::new())
 }
 
-/// Independent projection for the oracle: hits through `CameraFrame::project`, misses as the
-/// direction's vanishing point.
+/// Projection for the oracle: the cache's projector (checked against
+/// `CameraFrame::project` in `projector_agrees_with_the_camera`), pixel by `floor`.
 fn oracle_project(cam: &CameraFrame, p: &CachedPoint) -> Option<(usize, f32)> {
-    let (sx, sy, z) = if p.hit {
-        cam.project(p.position)?
-    } else {
-        let d = p.position;
-        let z = d.dot(cam.forward);
-        if z <= 1e-6 {
-            return None;
-        }
-        let x = d.dot(cam.right) / (z * cam.tan_half_y * cam.aspect);
-        let y = d.dot(cam.up) / (z * cam.tan_half_y);
-        ((x + 1.0) * 0.5 * cam.width as f32, (1.0 - y) * 0.5 * cam.height as f32, f32::INFINITY)
-    };
+    let (sx, sy, z) = Projector::new(cam).project(p.position, p.hit)?;
     if !(sx >= 0.0 && sy >= 0.0 && sx < cam.width as f32 && sy < cam.height as f32) {
         return None;
     }
     Some((sy.floor() as usize * cam.width as usize + sx.floor() as usize, z))
+}
+
+#[test]
+fn projector_agrees_with_the_camera() {
+    let mut rng = Rng(41);
+    for _ in 0..20 {
+        let (w, h) = (16 + (rng.next() % 1000) as u32, 16 + (rng.next() % 800) as u32);
+        let cam = camera(rng.vec(-20.0, 20.0), rng.vec(-1.0, 1.0), w, h);
+        let prj = Projector::new(&cam);
+        for _ in 0..500 {
+            let p = cam.eye + rng.vec(-30.0, 30.0);
+            match (prj.project(p, true), cam.project(p)) {
+                (Some((sx, sy, z)), Some((cx, cy, cz))) => {
+                    assert_eq!(z, cz, "depth is computed the same way");
+                    let tol = 1e-3 + 1e-5 * sx.abs().max(sy.abs());
+                    assert!((sx - cx).abs() < tol && (sy - cy).abs() < tol, "{sx},{sy} vs {cx},{cy}");
+                }
+                (None, None) => {}
+                (a, b) => panic!("{a:?} vs {b:?}"),
+            }
+            // A miss direction projects like a very far point in that direction.
+            let d = (p - cam.eye).normalize();
+            if let (Some((sx, sy, z)), Some((fx, fy, _))) = (prj.project(d, false), cam.project(cam.eye + d * 1.0e4)) {
+                assert_eq!(z, f32::INFINITY);
+                if fx.abs() > 2.0 * w as f32 || fy.abs() > 2.0 * h as f32 {
+                    continue; // far outside the view the far-point reference is imprecise
+                }
+                let tol = 0.05;
+                assert!((sx - fx).abs() < tol && (sy - fy).abs() < tol, "{sx},{sy} vs {fx},{fy}");
+            }
+        }
+    }
 }
 
 #[test]
@@ -163,20 +185,11 @@ fn reprojection_and_culling_match_brute_force() {
                     assert_eq!(pi.color[i], p.color);
                     assert_eq!(pi.depth[i], dc);
                     assert_eq!(pi.age[i], 1.0);
-                    // Subpixel position reproduces the projection.
+                    // Subpixel position reproduces the projection (to 1/65536 of a pixel).
                     let [u, v] = pi.subpixel[i];
                     assert!((0.0..1.0).contains(&u) && (0.0..1.0).contains(&v));
-                    let (sx, sy) = if p.hit {
-                        let (sx, sy, _) = cam.project(p.position).unwrap();
-                        (sx, sy)
-                    } else {
-                        let d = p.position;
-                        let z = d.dot(cam.forward);
-                        let xx = d.dot(cam.right) / (z * cam.tan_half_y * cam.aspect);
-                        let yy = d.dot(cam.up) / (z * cam.tan_half_y);
-                        ((xx + 1.0) * 0.5 * w as f32, (1.0 - yy) * 0.5 * h as f32)
-                    };
-                    assert!((x as f32 + u - sx).abs() < 1e-4 && (y as f32 + v - sy).abs() < 1e-4);
+                    let (sx, sy, _) = Projector::new(&cam).project(p.position, p.hit).unwrap();
+                    assert!((x as f32 + u - sx).abs() < 1e-3 && (y as f32 + v - sy).abs() < 1e-3);
                 }
             }
         }
@@ -594,4 +607,35 @@ fn samples_stay_in_the_pool_region_of_their_row_band() {
         assert!((r.start..r.end).contains(&slot), "row {y} went to slot {slot}");
     }
     assert_eq!(c.len(), c.capacity());
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    // Depth buffers per share of the points are merged: any split gives the same frame.
+    let mut rng = Rng(23);
+    let (w, h) = (40u32, 30u32);
+    let cam = camera(Vec3::new(1.0, 2.0, 6.0), Vec3::ZERO, w, h);
+    let samples: Vec<Sample> = (0..3000)
+        .map(|_| {
+            let s = if rng.next() % 8 == 0 { miss(rng.vec(-1.0, 1.0), rng.color()) } else { hit(rng.vec(-2.0, 2.0), rng.color(), 0) };
+            at(s, (rng.next() % w as u64) as u32, (rng.next() % h as u64) as u32)
+        })
+        .collect();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut c = cache(w, h, 2.0);
+            for s in &samples {
+                c.insert(s);
+            }
+            let counts = frame(&mut c, &cam);
+            let counts2 = frame(&mut c, &cam);
+            (counts, counts2, c.point_image().point.clone(), c.image().to_vec(), c.filter_weights().to_vec())
+        })
+    };
+    let one = run(1);
+    assert!(one.0.with_point > 0 && one.0.occluded > 0, "{:?}", one.0);
+    for threads in [2, 3, 5] {
+        assert!(run(threads) == one, "{threads} threads differ from 1");
+    }
 }

@@ -75,7 +75,7 @@ pub struct Sampler {
     height: u32,
     seed: u64,
     frame: u64,
-    /// Per pixel: expected number of picks this frame, in [0, 1].
+    /// Per pixel priority of this frame (before scaling to the budget).
     prio: Vec<f32>,
     /// Diffused error of the current and the next row (one guard cell each side).
     err_cur: Vec<f32>,
@@ -94,7 +94,8 @@ pub(crate) fn mix64(mut z: u64) -> u64 {
 /// Uniform in [0, 1) from the top 24 bits.
 #[inline]
 fn unit(h: u64) -> f32 {
-    (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+    // Via i32: a single int-to-float instruction, unlike u64.
+    ((h >> 40) as i32) as f32 * (1.0 / (1u64 << 24) as f32)
 }
 
 /// `x + u` for `u` in [0, 1), kept below `x + 1` despite rounding.
@@ -165,27 +166,32 @@ impl Sampler {
             return;
         }
         let max_age = cfg.max_age_frames;
-        let total: f64 = self
+        let (total, max) = self
             .prio
             .par_chunks_mut(w)
             .enumerate()
             .map(|(y, row)| {
-                let mut s = 0.0f64;
+                let (mut s, mut m) = (0.0f64, 0.0f32);
                 for (x, p) in row.iter_mut().enumerate() {
                     *p = priority(weights[y * w + x], ages[y * w + x], max_age);
                     s += *p as f64;
+                    m = m.max(*p);
                 }
-                s
+                (s, m)
             })
-            .sum();
-        self.scale_to_budget(total, budget as f64);
-        self.dither(frame, budget, out);
+            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)));
+        let scale = self.scale_to_budget(total, max, budget as f64);
+        self.dither(frame, scale, budget, out);
     }
 
-    /// Scales the priorities so they sum to `budget` with each capped at 1 (a pixel is picked
-    /// at most once): water-filling, a few passes when some pixels saturate.
-    fn scale_to_budget(&mut self, total: f64, budget: f64) {
+    /// The factor that scales the priorities to sum to `budget` with each capped at 1 (a
+    /// pixel is picked at most once): water-filling, extra passes only when some pixels
+    /// saturate.
+    fn scale_to_budget(&self, total: f64, max: f32, budget: f64) -> f32 {
         let mut s = budget / total.max(f64::MIN_POSITIVE);
+        if max as f64 * s < 1.0 {
+            return s as f32;
+        }
         for _ in 0..16 {
             let (saturated, rest): (f64, f64) = self
                 .prio
@@ -212,16 +218,16 @@ impl Sampler {
             }
             s = next;
         }
-        let s = s as f32;
-        self.prio.par_chunks_mut(16 * 1024).for_each(|c| c.iter_mut().for_each(|p| *p = (*p * s).min(1.0)));
+        s as f32
     }
 
-    /// Serpentine Floyd–Steinberg over the scaled priorities; stops at `budget` picks.
+    /// Serpentine Floyd–Steinberg over the priorities times `scale` (capped at 1); stops at
+    /// `budget` picks.
     ///
     /// Per frame, the scan runs over the image shifted cyclically by a random offset, starts
     /// in alternating directions and uses hashed thresholds, so equal-priority pixels are not
     /// picked in the same pattern every frame.
-    fn dither(&mut self, frame: u64, budget: usize, out: &mut Vec<PixelRequest>) {
+    fn dither(&mut self, frame: u64, scale: f32, budget: usize, out: &mut Vec<PixelRequest>) {
         let (w, h) = (self.width as usize, self.height as usize);
         let frame_key = mix64(self.seed ^ mix64(frame));
         let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
@@ -229,18 +235,31 @@ impl Sampler {
         self.err_cur.iter_mut().for_each(|e| *e = 0.0);
         self.err_next.iter_mut().for_each(|e| *e = 0.0);
         let flip = frame & 1 == 1;
+        // Thresholds from one xorshift64* stream per frame (cheaper than a hash per pixel).
+        let mut rng = frame_key | 1;
         for ly in 0..h {
             let y = (ly + oy) % h;
             let left_to_right = (ly % 2 == 0) != flip;
             let row = &self.prio[y * w..(y + 1) * w];
+            // Physical column of the first logical column visited, then stepped with wrap.
+            let mut x = if left_to_right { ox } else { (ox + w - 1) % w };
             for step in 0..w {
                 // Logical column lx indexes the error buffers (guard cells at 0 and w+1).
                 let lx = if left_to_right { step } else { w - 1 - step };
-                let x = (lx + ox) % w;
+                if step > 0 {
+                    if left_to_right {
+                        x = if x + 1 == w { 0 } else { x + 1 };
+                    } else {
+                        x = if x == 0 { w - 1 } else { x - 1 };
+                    }
+                }
                 let (ahead, behind) = if left_to_right { (lx + 2, lx) } else { (lx, lx + 2) };
-                let q = row[x];
+                let q = (row[x] * scale).min(1.0);
                 let v = q + self.err_cur[lx + 1];
-                let hsh = mix64(frame_key ^ ((y * w + x) as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93));
+                rng ^= rng >> 12;
+                rng ^= rng << 25;
+                rng ^= rng >> 27;
+                let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
                 let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
                 let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
                     let h2 = mix64(hsh);

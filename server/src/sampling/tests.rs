@@ -173,3 +173,25 @@ fn budget_from_sparseness() {
     assert_eq!(SamplingConfig { sparseness: 0.5, ..c }.budget(100), 100);
 }
 
+
+#[test]
+fn scaling_meets_the_budget_with_saturated_pixels() {
+    // Water-filling: sum over pixels of min(1, s * p) equals the budget, also when many
+    // pixels would exceed 1 with the plain scale budget / sum(p).
+    let mut rng = Rng(77);
+    for case in 0..40 {
+        let (w, h) = (50u32, 40u32);
+        let n = (w * h) as usize;
+        let mut s = Sampler::new(w, h, case);
+        let hot = rng.f();
+        for p in s.prio.iter_mut() {
+            *p = if rng.f() < hot { 1.0 } else { 0.001 + 0.05 * rng.f() };
+        }
+        let total: f64 = s.prio.iter().map(|&p| p as f64).sum();
+        let max = s.prio.iter().cloned().fold(0.0f32, f32::max);
+        let budget = 1 + (rng.next() % (n as u64 - 1)) as usize;
+        let scale = s.scale_to_budget(total, max, budget as f64);
+        let got: f64 = s.prio.iter().map(|&p| (p * scale).min(1.0) as f64).sum();
+        assert!((got - budget as f64).abs() <= 1e-3 * budget as f64 + 0.5, "case {case}: {got} for budget {budget}");
+    }
+}

@@ -20,18 +20,39 @@ struct Slots {
 }
 
 /// The hand-over point between the frame-loop thread and the async stream to the viewer.
-#[derive(Default)]
 pub struct SessionOutput {
     slots: Mutex<Slots>,
     notify: Notify,
     frames_dropped: AtomicU64,
     frames_published: AtomicU64,
     closed: AtomicBool,
+    /// Becomes true once the session ended or was closed, for tasks that must stop with it.
+    done: tokio::sync::watch::Sender<bool>,
+}
+
+impl Default for SessionOutput {
+    fn default() -> Self {
+        SessionOutput {
+            slots: Mutex::default(),
+            notify: Notify::new(),
+            frames_dropped: AtomicU64::new(0),
+            frames_published: AtomicU64::new(0),
+            closed: AtomicBool::new(false),
+            done: tokio::sync::watch::Sender::new(false),
+        }
+    }
 }
 
 impl SessionOutput {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Resolves once the session has ended or been closed.
+    pub async fn done(&self) {
+        let mut rx = self.done.subscribe();
+        // The sender lives in `self`, so this cannot fail while we borrow it.
+        let _ = rx.wait_for(|d| *d).await;
     }
 
     fn slots(&self) -> std::sync::MutexGuard<'_, Slots> {
@@ -63,6 +84,7 @@ impl SessionOutput {
     /// The frame loop has ended: once the queued messages are taken, [`Self::next`] ends.
     pub fn end(&self) {
         self.slots().ended = true;
+        self.done.send_replace(true);
         self.notify.notify_one();
     }
 
@@ -78,6 +100,7 @@ impl SessionOutput {
     /// The viewer is gone: the frame loop stops at its next check.
     pub fn close(&self) {
         self.closed.store(true, Ordering::SeqCst);
+        self.done.send_replace(true);
         self.notify.notify_one();
     }
 
@@ -178,6 +201,7 @@ mod tests {
         });
         assert_eq!(seq_of(out.next().await.unwrap()), 9);
         assert!(out.next().await.is_none());
+        out.done().await;
         t.join().unwrap();
     }
 }

@@ -29,10 +29,13 @@ impl Worker {
             rt.block_on(async {
                 let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
                 addr_tx.send(listener.local_addr().unwrap()).unwrap();
-                let svc = edgepoint_worker::service::WorkerService::new(edgepoint_worker::service::WorkerConfig::default());
+                let svc = edgepoint_worker::service::WorkerService::new(4, 2).unwrap();
+                let svc = edgepoint_proto::shader_worker_server::ShaderWorkerServer::new(svc)
+                    .max_decoding_message_size(DEFAULT_MAX_MESSAGE_BYTES)
+                    .max_encoding_message_size(DEFAULT_MAX_MESSAGE_BYTES);
                 tokio::spawn(
                     tonic::transport::Server::builder()
-                        .add_service(svc.into_server(DEFAULT_MAX_MESSAGE_BYTES))
+                        .add_service(svc)
                         .serve_with_incoming(TcpListenerStream::new(listener)),
                 );
             });
