@@ -34,11 +34,13 @@ fn kernel_table() -> &'static [f32] {
 #[inline]
 fn k1(table: &[f32], o: f32) -> f32 {
     // Offsets are within [-HALF_RANGE, HALF_RANGE] by construction (|dx| <= 2, subpixel in
-    // [0, 1)); the clamp keeps the index in the table whatever comes in, NaN included.
-    let f = ((o + HALF_RANGE) * STEPS + 0.5).clamp(0.0, 2.0 * HALF_RANGE * STEPS);
-    let f = if f.is_nan() { 0.0 } else { f };
-    // SAFETY: f is finite and in [0, table.len() - 1] after the clamp and NaN check.
-    table[unsafe { f.to_int_unchecked::<usize>() }]
+    // [0, 1)); the comparisons keep the index in the table whatever comes in (NaN fails the
+    // first and becomes 0) without the cost of `clamp`'s NaN handling.
+    let f = (o + HALF_RANGE) * STEPS + 0.5;
+    let f = if f > 0.0 { f } else { 0.0 };
+    let f = if f < 2.0 * HALF_RANGE * STEPS { f } else { 2.0 * HALF_RANGE * STEPS };
+    // SAFETY: f is finite and in [0, table.len() - 1] here.
+    table[unsafe { f.to_int_unchecked::<i32>() } as usize]
 }
 
 impl RenderCache {
@@ -86,6 +88,25 @@ fn gather(pi: &PointImage, table: &[f32], x: usize, y: usize, r0: usize, r: usiz
     (c, ws)
 }
 
+/// [`gather`] over the 3x3 neighbourhood of an interior pixel `i`, unrolled (the common
+/// case; the same sums in the same order).
+#[inline]
+fn gather3_interior(pi: &PointImage, table: &[f32], i: usize, w: usize) -> (Vec3, f32) {
+    let (mut c, mut ws) = (Vec3::ZERO, 0.0f32);
+    for (dy, row) in [(-1.0f32, i - w), (0.0, i), (1.0, i + w)] {
+        for (dx, j) in [(-1.0f32, row - 1), (0.0, row), (1.0, row + 1)] {
+            if pi.point[j] == NO_POINT {
+                continue;
+            }
+            let [u, v] = pi.subpixel[j];
+            let wt = k1(table, dx + u - 0.5) * k1(table, dy + v - 0.5);
+            c += pi.color[j] * wt;
+            ws += wt;
+        }
+    }
+    (c, ws)
+}
+
 /// Fills row `y` of the image and the weights. Returns (pixels with a point, filled, empty).
 #[inline(never)]
 fn interpolate_row(pi: &PointImage, bg: Vec3, y: usize, img: &mut [Vec3], wt: &mut [f32]) -> (u32, u32, u32) {
@@ -103,7 +124,8 @@ fn interpolate_row(pi: &PointImage, bg: Vec3, y: usize, img: &mut [Vec3], wt: &m
             with_point += 1;
             continue;
         }
-        let (mut c, mut ws) = gather(pi, table, x, y, 0, 1);
+        let interior = x > 0 && y > 0 && x + 1 < w && y + 1 < pi.height as usize;
+        let (mut c, mut ws) = if interior { gather3_interior(pi, table, i, w) } else { gather(pi, table, x, y, 0, 1) };
         if ws == 0.0 {
             (c, ws) = gather(pi, table, x, y, 2, 2);
         }

@@ -39,8 +39,9 @@ impl Projector {
     /// Projects a cached point: a hit is a world position, a miss a direction (a point at
     /// infinity, view depth `+inf`). Returns continuous pixel coordinates and view depth, or
     /// `None` behind (or too near) the eye. Agrees with `CameraFrame::project` up to
-    /// rounding.
-    #[inline]
+    /// rounding. The reference for the hand-written loop of `project_share` (the tests
+    /// check that the cache reproduces it exactly).
+    #[cfg(test)]
     pub(crate) fn project(&self, p: Vec3, hit: bool) -> Option<(f32, f32, f32)> {
         let d = if hit { p - self.eye } else { p };
         // Same expression as `CameraFrame::project`, so hit depths are identical.
@@ -52,25 +53,6 @@ impl Projector {
         let sx = self.cx + d.dot(self.rx) * inv;
         let sy = self.cy - d.dot(self.uy) * inv;
         Some((sx, sy, if hit { z } else { f32::INFINITY }))
-    }
-
-    /// The pixel containing continuous image position (`sx`, `sy`) and the position inside
-    /// it in units of 1/65536, if inside the image.
-    #[inline]
-    pub(crate) fn pixel_of(&self, sx: f32, sy: f32) -> Option<(u32, u32, u16, u16)> {
-        // Written so that NaN fails every comparison.
-        if sx >= 0.0 && sy >= 0.0 && sx < self.wf && sy < self.hf {
-            // SAFETY: both values are finite and in [0, 2^32) after the test above (image
-            // sizes are u32).
-            let (px, py) = unsafe { (sx.to_int_unchecked::<u32>(), sy.to_int_unchecked::<u32>()) };
-            let (px, py) = (px.min(self.width - 1), py.min(self.height - 1));
-            // SAFETY: s - p is finite and in [0, 1] here (p = floor(s), or s's pixel clamped
-            // into the image), so the value fits a u16 after the min.
-            let frac = |s: f32, p: u32| unsafe { ((s - p as f32) * 65536.0).min(65535.0).to_int_unchecked::<u16>() };
-            Some((px, py, frac(sx, px), frac(sy, py)))
-        } else {
-            None
-        }
     }
 }
 
@@ -150,7 +132,9 @@ impl RenderCache {
         self.zbufs.par_iter_mut().zip(self.proj.par_chunks_mut(share)).enumerate().for_each(|(k, (zbuf, proj))| {
             let base = k * share;
             let n = proj.len();
-            project_share(&prj, base, &pool.flags[base..base + n], &pool.position[base..base + n], proj, zbuf);
+            let r = base..base + n;
+            let xyz = [&pool.px[r.clone()], &pool.py[r.clone()], &pool.pz[r.clone()]];
+            project_share(&prj, base, &pool.flags[r], xyz, proj, zbuf);
         });
 
         // Merge the shares into zbufs[0] and take the nearest depth over each pixel and its
@@ -184,23 +168,59 @@ impl RenderCache {
     }
 }
 
+/// Points per block of pass 1.
+const BLOCK: usize = 256;
+
 /// Pass 1 for one share of the points (slots `base..`): project each valid point, record
-/// where it went, keep the nearest per pixel in `zbuf`.
+/// where it went, keep the nearest per pixel in `zbuf`. Per block of points, a branch-free
+/// loop over the coordinate arrays projects them (the compiler vectorises it, four points
+/// per instruction), then a scalar loop places them. The arithmetic is that of
+/// [`Projector::project`], operation for operation, so the results are identical (the tests
+/// check the cache against it).
 #[inline(never)]
-fn project_share(prj: &Projector, base: usize, flags: &[u8], position: &[Vec3], proj: &mut [Projected], zbuf: &mut [u64]) {
+fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], proj: &mut [Projected], zbuf: &mut [u64]) {
     let w = prj.width as usize;
-    for (j, ((pr, &f), &pos)) in proj.iter_mut().zip(flags).zip(position).enumerate() {
-        pr.pixel = NO_POINT;
-        if f & FLAG_VALID == 0 {
-            continue;
+    let (wmax, hmax) = (prj.width as i64 - 1, prj.height as i64 - 1);
+    let (e, r, u, f) = (prj.eye, prj.rx, prj.uy, prj.f);
+    let (mut zs, mut sxs, mut sys) = ([0f32; BLOCK], [0f32; BLOCK], [0f32; BLOCK]);
+    for (b, proj) in proj.chunks_mut(BLOCK).enumerate() {
+        let start = b * BLOCK;
+        let n = proj.len();
+        let fl = &flags[start..start + n];
+        let (bx, by, bz) = (&xyz[0][start..start + n], &xyz[1][start..start + n], &xyz[2][start..start + n]);
+        for k in 0..n {
+            // 1 for a hit (subtract the eye), 0 for a miss direction.
+            let hm = f32::from((fl[k] >> 1) & 1);
+            let (x, y, zz) = (bx[k] - e.x * hm, by[k] - e.y * hm, bz[k] - e.z * hm);
+            let z = x * f.x + y * f.y + zz * f.z;
+            let inv = 1.0 / z;
+            zs[k] = z;
+            sxs[k] = prj.cx + (x * r.x + y * r.y + zz * r.z) * inv;
+            sys[k] = prj.cy - (x * u.x + y * u.y + zz * u.z) * inv;
         }
-        let Some((sx, sy, z)) = prj.project(pos, f & FLAG_HIT != 0) else { continue };
-        let Some((px, py, fx, fy)) = prj.pixel_of(sx, sy) else { continue };
-        let p = py as usize * w + px as usize;
-        *pr = Projected { pixel: p as u32, depth: z, fx, fy };
-        let key = (u64::from(z.to_bits()) << 32) | (base + j) as u64;
-        if key < zbuf[p] {
-            zbuf[p] = key;
+        for (k, pr) in proj.iter_mut().enumerate() {
+            pr.pixel = NO_POINT;
+            let (z, sx, sy) = (zs[k], sxs[k], sys[k]);
+            // Negated comparisons so that NaN is dropped too.
+            let visible = z > 1e-6 && sx >= 0.0 && sy >= 0.0 && sx < prj.wf && sy < prj.hf;
+            if fl[k] & FLAG_VALID == 0 || !visible {
+                continue;
+            }
+            // SAFETY: finite and in [0, 2^32) after the test above.
+            let (px, py) = unsafe { (sx.to_int_unchecked::<i64>(), sy.to_int_unchecked::<i64>()) };
+            let px = if px > wmax { wmax } else { px };
+            let py = if py > hmax { hmax } else { py };
+            let (fx, fy) = ((sx - px as f32) * 65536.0, (sy - py as f32) * 65536.0);
+            // SAFETY: in [0, 65536] before the comparison, so in range of i32 after it.
+            let fx = unsafe { (if fx < 65535.0 { fx } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
+            let fy = unsafe { (if fy < 65535.0 { fy } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
+            let p = py as usize * w + px as usize;
+            let depth = if fl[k] & FLAG_HIT != 0 { z } else { f32::INFINITY };
+            *pr = Projected { pixel: p as u32, depth, fx, fy };
+            let key = (u64::from(depth.to_bits()) << 32) | (base + start + k) as u64;
+            if key < zbuf[p] {
+                zbuf[p] = key;
+            }
         }
     }
 }
@@ -218,8 +238,8 @@ fn merge_row(rest: &[Vec<u64>], y: usize, zrow: &mut [u64], mrow: &mut [u32]) {
         }
     }
     let bits = |x: usize| (zrow[x] >> 32) as u32;
-    for x in 0..w {
-        mrow[x] = bits(x.saturating_sub(1)).min(bits(x)).min(bits((x + 1).min(w - 1)));
+    for (x, m) in mrow.iter_mut().enumerate() {
+        *m = bits(x.saturating_sub(1)).min(bits(x)).min(bits((x + 1).min(w - 1)));
     }
 }
 

@@ -515,7 +515,7 @@ fn invalidate_objects_removes_exactly_those_points() {
             }
         }
         let before: Vec<Option<CachedPoint>> = (0..c.capacity() as u32).map(|i| c.point(i)).collect();
-        let drop: Vec<u32> = (0..10).filter(|_| rng.next() % 3 == 0).collect();
+        let drop: Vec<u32> = (0..10).filter(|_| rng.next().is_multiple_of(3)).collect();
         c.invalidate_objects(&drop);
         let mut kept = 0;
         for (i, b) in before.iter().enumerate() {
@@ -617,7 +617,7 @@ fn results_do_not_depend_on_the_thread_count() {
     let cam = camera(Vec3::new(1.0, 2.0, 6.0), Vec3::ZERO, w, h);
     let samples: Vec<Sample> = (0..3000)
         .map(|_| {
-            let s = if rng.next() % 8 == 0 { miss(rng.vec(-1.0, 1.0), rng.color()) } else { hit(rng.vec(-2.0, 2.0), rng.color(), 0) };
+            let s = if rng.next().is_multiple_of(8) { miss(rng.vec(-1.0, 1.0), rng.color()) } else { hit(rng.vec(-2.0, 2.0), rng.color(), 0) };
             at(s, (rng.next() % w as u64) as u32, (rng.next() % h as u64) as u32)
         })
         .collect();

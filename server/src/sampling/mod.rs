@@ -241,52 +241,16 @@ impl Sampler {
             let y = (ly + oy) % h;
             let left_to_right = (ly % 2 == 0) != flip;
             let row = &self.prio[y * w..(y + 1) * w];
-            // Physical column of the first logical column visited, then stepped with wrap.
-            let mut x = if left_to_right { ox } else { (ox + w - 1) % w };
-            for step in 0..w {
-                // Logical column lx indexes the error buffers (guard cells at 0 and w+1).
-                let lx = if left_to_right { step } else { w - 1 - step };
-                if step > 0 {
-                    if left_to_right {
-                        x = if x + 1 == w { 0 } else { x + 1 };
-                    } else {
-                        x = if x == 0 { w - 1 } else { x - 1 };
-                    }
-                }
-                let (ahead, behind) = if left_to_right { (lx + 2, lx) } else { (lx, lx + 2) };
-                let q = (row[x] * scale).min(1.0);
-                let v = q + self.err_cur[lx + 1];
-                rng ^= rng >> 12;
-                rng ^= rng << 25;
-                rng ^= rng >> 27;
-                let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
-                let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
-                let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
-                    let h2 = mix64(hsh);
-                    out.push(PixelRequest {
-                        x: x as u32,
-                        y: y as u32,
-                        sx: inside_pixel(x as u32, unit(h2)),
-                        sy: inside_pixel(y as u32, unit(h2 << 24)),
-                    });
-                    if out.len() == budget {
-                        return;
-                    }
-                    v - 1.0
-                } else {
-                    v
-                };
-                self.err_cur[ahead] += e * (7.0 / 16.0);
-                self.err_next[behind] += e * (3.0 / 16.0);
-                self.err_next[lx + 1] += e * (5.0 / 16.0);
-                self.err_next[ahead] += e * (1.0 / 16.0);
+            let mut scan = RowScan { row, scale, y, ox, cur: &self.err_cur, next: &mut self.err_next, rng: &mut rng, budget, out };
+            let (done, carry) = if left_to_right { scan.run::<true>() } else { scan.run::<false>() };
+            if done {
+                return;
             }
             // Fold the error pushed past the row's ends back into the image instead of
             // losing it: at sparse priorities the lost error would cost a good part of the
-            // budget. The row ended at the left edge when scanning left-to-right and vice versa.
-            let end = if left_to_right { w + 1 } else { 0 };
+            // budget. The row ended at the right edge when scanning left-to-right.
             let end_cell = if left_to_right { w } else { 1 };
-            self.err_next[end_cell] += self.err_cur[end];
+            self.err_next[end_cell] += carry;
             self.err_next[1] += self.err_next[0];
             self.err_next[w] += self.err_next[w + 1];
             self.err_next[0] = 0.0;
@@ -294,6 +258,77 @@ impl Sampler {
             std::mem::swap(&mut self.err_cur, &mut self.err_next);
             self.err_next.iter_mut().for_each(|e| *e = 0.0);
         }
+    }
+}
+
+/// One row of the serpentine error diffusion. Error buffers are indexed by logical column + 1
+/// (guard cells at both ends); `x` is the physical column, the logical one shifted by `ox`.
+struct RowScan<'a> {
+    row: &'a [f32],
+    scale: f32,
+    y: usize,
+    ox: usize,
+    cur: &'a [f32],
+    next: &'a mut [f32],
+    rng: &'a mut u64,
+    budget: usize,
+    out: &'a mut Vec<PixelRequest>,
+}
+
+impl RowScan<'_> {
+    /// Scans the row (left to right when `LTR`). Returns whether the budget is reached and
+    /// the error carried past the row's end.
+    #[inline(always)]
+    fn run<const LTR: bool>(&mut self) -> (bool, f32) {
+        let w = self.row.len();
+        let mut x = if LTR { self.ox } else { (self.ox + w - 1) % w };
+        // The 7/16 share for the next pixel of the row, kept in a register.
+        let mut carry = 0.0f32;
+        let mut rng = *self.rng;
+        for step in 0..w {
+            let lx = if LTR { step } else { w - 1 - step };
+            let q = (self.row[x] * self.scale).min(1.0);
+            let v = q + self.cur[lx + 1] + carry;
+            rng ^= rng >> 12;
+            rng ^= rng << 25;
+            rng ^= rng >> 27;
+            let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
+            let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
+            let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
+                let h2 = mix64(hsh);
+                self.out.push(PixelRequest {
+                    x: x as u32,
+                    y: self.y as u32,
+                    sx: inside_pixel(x as u32, unit(h2)),
+                    sy: inside_pixel(self.y as u32, unit(h2 << 24)),
+                });
+                if self.out.len() == self.budget {
+                    *self.rng = rng;
+                    return (true, 0.0);
+                }
+                v - 1.0
+            } else {
+                v
+            };
+            carry = e * (7.0 / 16.0);
+            let (ahead, behind) = if LTR { (lx + 2, lx) } else { (lx, lx + 2) };
+            self.next[behind] += e * (3.0 / 16.0);
+            self.next[lx + 1] += e * (5.0 / 16.0);
+            self.next[ahead] += e * (1.0 / 16.0);
+            x = if LTR {
+                if x + 1 == w {
+                    0
+                } else {
+                    x + 1
+                }
+            } else if x == 0 {
+                w - 1
+            } else {
+                x - 1
+            };
+        }
+        *self.rng = rng;
+        (false, carry)
     }
 }
 

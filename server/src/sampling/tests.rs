@@ -34,9 +34,9 @@ fn picks_are_distinct_inside_their_pixels_and_within_budget() {
         let (w, h) = (1 + (rng.next() % 90) as u32, 1 + (rng.next() % 70) as u32);
         let n = (w * h) as usize;
         let mut s = Sampler::new(w, h, case);
-        let weights: Vec<f32> = (0..n).map(|_| if rng.next() % 4 == 0 { 0.0 } else { rng.f() * 3.0 }).collect();
+        let weights: Vec<f32> = (0..n).map(|_| if rng.next().is_multiple_of(4) { 0.0 } else { rng.f() * 3.0 }).collect();
         let ages: Vec<f32> =
-            (0..n).map(|_| if rng.next() % 3 == 0 { f32::INFINITY } else { (rng.next() % 200) as f32 }).collect();
+            (0..n).map(|_| if rng.next().is_multiple_of(3) { f32::INFINITY } else { (rng.next() % 200) as f32 }).collect();
         for budget in [0, 1, n / 64 + 1, n / 5, n, n + 17] {
             s.select(&weights, &ages, &cfg, budget, &mut out);
             check_picks(&out, w, h, budget);

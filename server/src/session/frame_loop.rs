@@ -24,9 +24,24 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tonic::Code;
 
-/// Frames' worth of requests that may be outstanding at once: enough to cover worker latency,
+/// Frames' worth of requests that may be outstanding at most: enough to cover worker latency,
 /// few enough that requests are not shaded for a view long gone (back-pressure).
 pub const OUTSTANDING_FRAMES: usize = 4;
+/// Once the workers' rate is known, outstanding requests are also held to about this much
+/// of their work: more in flight only makes every sample arrive later (Little's law), it
+/// cannot make the workers faster.
+pub const TARGET_SAMPLE_LATENCY: Duration = Duration::from_millis(100);
+
+/// Requests allowed in flight: between one frame's budget and [`OUTSTANDING_FRAMES`] of
+/// them, and no more than the workers shade in [`TARGET_SAMPLE_LATENCY`] at their measured
+/// `rate` (samples per second; 0 = not measured yet).
+pub fn max_outstanding(per_frame: usize, rate: f64) -> usize {
+    let most = per_frame * OUTSTANDING_FRAMES;
+    if rate <= 0.0 || !rate.is_finite() {
+        return most;
+    }
+    ((rate * TARGET_SAMPLE_LATENCY.as_secs_f64()) as usize).clamp(per_frame, most)
+}
 /// How often a waiting loop checks whether the viewer is gone.
 const POLL: Duration = Duration::from_millis(50);
 
@@ -160,7 +175,7 @@ impl FrameLoop {
         let t = Instant::now();
         let pixels = self.width as usize * self.height as usize;
         let per_frame = self.settings.frame_budget(pixels);
-        let max_outstanding = per_frame * OUTSTANDING_FRAMES;
+        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second());
         let outstanding = self.dispatcher.outstanding_requests() as usize;
         let budget = per_frame.min(max_outstanding.saturating_sub(outstanding));
         let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
@@ -387,4 +402,18 @@ fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
 
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outstanding_follows_the_measured_rate_within_bounds() {
+        assert_eq!(max_outstanding(1000, 0.0), 4000, "unmeasured: four frames");
+        assert_eq!(max_outstanding(1000, 25_000.0), 2500, "100 ms of work at 25k samples/s");
+        assert_eq!(max_outstanding(1000, 1_000.0), 1000, "never below one frame");
+        assert_eq!(max_outstanding(1000, 1e9), 4000, "never above four frames");
+        assert_eq!(max_outstanding(1000, f64::NAN), 4000);
+    }
 }

@@ -18,7 +18,7 @@ mod requests;
 mod settings;
 
 pub use feedback::{ObjectSeen, ShadingFeedback, TripleKey, TripleSeen};
-pub use frame_loop::{SessionCounters, OUTSTANDING_FRAMES};
+pub use frame_loop::{max_outstanding, SessionCounters, OUTSTANDING_FRAMES, TARGET_SAMPLE_LATENCY};
 pub use output::{SessionOutput, MAX_QUEUED_REJECTIONS};
 pub use requests::{build_batches, splitmix64, BatchSpec, RequestInfo, RequestRing};
 pub use settings::{
