@@ -1,5 +1,6 @@
 //! edgepoint renderer library. Folders follow the per-frame pipeline (DESIGN.md):
 //!
+//! - [`edges`] — paper 000 §6: discontinuity edges (brute-force finder; the oracle).
 //! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
 //!   occlusion culling, gap-filling interpolation (no networking).
 //! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
@@ -12,6 +13,7 @@
 //! - [`reference`] — reference renders (1 spp and converged) through the workers.
 //! - [`service`] — the `Renderer` gRPC service.
 
+pub mod edges;
 pub mod encode;
 pub mod image_metrics;
 pub mod reference;
