@@ -7,10 +7,10 @@ use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 pub struct LoadArgs {
-    /// A .ply / .obj file (e.g. ../shared/data/dragon/dragon_vrip.ply).
+    /// A .ply / .obj file (e.g. ../shared/data/dragon/dragon_vrip.ply); the same as --scene PATH.
     #[arg(long, conflicts_with = "scene")]
     pub mesh: Option<std::path::PathBuf>,
-    /// A built-in scene name.
+    /// A built-in scene name or a .ply / .obj file [default: cornell].
     #[arg(long)]
     pub scene: Option<String>,
     /// Repeat the measurement this many times and report the median.
@@ -27,15 +27,14 @@ pub fn run(a: LoadArgs) -> Result<()> {
         (None, Some(s)) => s.clone(),
         (None, None) => "cornell".to_string(),
     };
+    // Read the files once, outside the timing: the workers parse scenes from bytes too.
+    let source = edgepoint_viewer::client::scene_source_from_arg(&what)?;
     let (mut load_ms, mut bvh_ms) = (Vec::new(), Vec::new());
     let mut summary = json!({});
     for i in 0..a.repeat.max(1) {
         let progress = LogProgress::new(&format!("load {what}"));
         let t = Instant::now();
-        let scene = match &a.mesh {
-            Some(p) => edgepoint_scene::load::load_path(p, &progress).map_err(|e| anyhow::anyhow!("{e}"))?,
-            None => edgepoint_scene::builtin::load(&what).map_err(|e| anyhow::anyhow!(e))?,
-        };
+        let scene = edgepoint_proto::scene_from_source(&source, &progress).map_err(|e| anyhow::anyhow!("{e}"))?;
         load_ms.push(t.elapsed().as_secs_f64() * 1e3);
         if i == 0 {
             let big = scene.objects.iter().max_by_key(|o| o.mesh.triangles.len()).context("scene has no objects")?;
