@@ -248,7 +248,7 @@ async fn an_unsendable_old_epoch_is_dropped_and_counted_answered() {
     d.shade_all([batch(1, 1, 3)], 1, Duration::from_secs(10), |_| {}).await.unwrap();
     assert!(d.submit(batch(2, 0, 3)));
     let ans = tokio::time::timeout(Duration::from_secs(10), d.next_answer()).await.unwrap().unwrap();
-    assert!(matches!(ans, Answer::Dropped { batch_id: 2, epoch: 0 }), "{ans:?}");
+    assert!(matches!(ans, Answer::Dropped { batch_id: 2, epoch: 0, .. }), "{ans:?}");
     assert_eq!(d.outstanding_requests(), 0, "a dropped batch does not leak outstanding requests");
     assert_eq!(d.stats().dropped_batches, 1);
 }
