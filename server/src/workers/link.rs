@@ -212,6 +212,7 @@ pub(super) async fn run(shared: Arc<Shared>, member: Arc<PoolMember>, state: Arc
     };
     let mut inflight = InFlightSet::new(&state, &member);
     let mut backoff = FIRST_BACKOFF;
+    let mut failed_attempts = 0u32;
     loop {
         let started = Instant::now();
         let end = tokio::select! {
@@ -231,8 +232,16 @@ pub(super) async fn run(shared: Arc<Shared>, member: Arc<PoolMember>, state: Arc
                 // A stream that ran a while was healthy: start the next backoff series afresh.
                 if started.elapsed() > Duration::from_secs(2) {
                     backoff = FIRST_BACKOFF;
+                    failed_attempts = 0;
                 }
-                tracing::warn!(worker = %member.url, requeued = n, retry_in_ms = backoff.as_millis() as u64, "worker link down: {err}");
+                failed_attempts += 1;
+                let retry_in_ms = backoff.as_millis() as u64;
+                // The first failure of a series is news; the retries that follow are not.
+                if failed_attempts == 1 || failed_attempts % 60 == 0 {
+                    tracing::warn!(worker = %member.url, requeued = n, retry_in_ms, failed_attempts, "worker link down: {err}");
+                } else {
+                    tracing::debug!(worker = %member.url, requeued = n, retry_in_ms, failed_attempts, "worker link still down: {err}");
+                }
             }
         }
         tokio::select! {
@@ -322,6 +331,7 @@ async fn stream_once(
         Err(_) => return format!("Shade got no answer within {:?}", cfg.call_timeout),
     };
     let _live = LiveGuard::new(shared, member, state);
+    tracing::debug!(worker = %member.url, "shade stream open");
     let mut sent = SentEpochs::default();
     let mut wire_id = 0u64;
     // When the worker last showed progress: its last answer, or when the link went from
