@@ -172,7 +172,7 @@ async fn tls_protects_the_viewer_port() {
     println!("plaintext to TLS: {:?}", plain.as_ref().err());
     assert!(plain.is_err(), "plaintext must not reach a TLS server");
     let wrong_ca = ConnectOptions { tls_ca: Some(other.0.join("ca.pem")), ..good.clone() };
-    let e = SessionClient::connect_with(&https, start_builtin("cornell", 64, 48), &wrong_ca).await.err().expect("an unknown CA is refused");
+    let e = SessionClient::connect_with(&https, start_builtin("cornell", 64, 48), &wrong_ca).await.expect_err("an unknown CA is refused");
     println!("unknown CA: {e}");
     assert!(e.to_string().to_lowercase().contains("certificate") || e.to_string().contains("cannot connect"), "{e}");
 

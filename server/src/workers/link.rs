@@ -237,7 +237,7 @@ pub(super) async fn run(shared: Arc<Shared>, member: Arc<PoolMember>, state: Arc
                 failed_attempts += 1;
                 let retry_in_ms = backoff.as_millis() as u64;
                 // The first failure of a series is news; the retries that follow are not.
-                if failed_attempts == 1 || failed_attempts % 60 == 0 {
+                if failed_attempts == 1 || failed_attempts.is_multiple_of(60) {
                     tracing::warn!(worker = %member.url, requeued = n, retry_in_ms, failed_attempts, "worker link down: {err}");
                 } else {
                     tracing::debug!(worker = %member.url, requeued = n, retry_in_ms, failed_attempts, "worker link still down: {err}");
