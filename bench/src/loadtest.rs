@@ -317,8 +317,10 @@ struct Window {
     samples: u64,
     max_gap_ms: f64,
     max_loop_gap_ms: f64,
-    /// Seconds into the window when every worker was live again (if it happened).
+    /// Seconds into the window of the first frame with every worker live (if any).
     all_live_after_s: Option<f64>,
+    /// Seconds into the window of the first frame with a worker missing (if any).
+    degraded_after_s: Option<f64>,
     min_live: u32,
 }
 
@@ -348,6 +350,9 @@ impl Watch {
             if f.live_workers >= self.workers && w.all_live_after_s.is_none() {
                 w.all_live_after_s = Some(t0.elapsed().as_secs_f64());
             }
+            if f.live_workers < self.workers && w.degraded_after_s.is_none() {
+                w.degraded_after_s = Some(t0.elapsed().as_secs_f64());
+            }
         }
         Ok(w)
     }
@@ -357,7 +362,7 @@ fn window_json(name: &str, w: &Window) -> Value {
     json!({
         "window": name, "frames": w.frames, "samples": w.samples,
         "max_frame_gap_ms": w.max_gap_ms, "max_frame_loop_gap_ms": w.max_loop_gap_ms,
-        "min_live_workers": w.min_live, "all_live_after_s": w.all_live_after_s,
+        "min_live_workers": w.min_live, "all_live_after_s": w.all_live_after_s, "degraded_after_s": w.degraded_after_s,
     })
 }
 
@@ -382,13 +387,14 @@ fn failover_phase(a: &LoadtestArgs, rt: &tokio::runtime::Runtime, cluster: &mut 
     let mut table = format!("failover phase: one {}x{} session, worker 0 killed/restarted then stopped/continued, {:.0} s windows (frame interval {:.0} ms)\n", a.width, a.height, s, interval_ms);
     for (name, w) in &windows {
         table += &format!(
-            "  {name:>9}: {} frames, {} samples, longest gap {:.0} ms at the viewer / {:.0} ms in the frame loop, live workers >= {}{}\n",
+            "  {name:>9}: {} frames, {} samples, longest gap {:.0} ms at the viewer / {:.0} ms in the frame loop, live workers >= {}{}{}\n",
             w.frames,
             w.samples,
             w.max_gap_ms,
             w.max_loop_gap_ms,
             w.min_live,
-            w.all_live_after_s.map(|t| format!(", all live after {:.2} s", t)).unwrap_or_default()
+            w.degraded_after_s.map(|t| format!(", a worker missing from {t:.2} s")).unwrap_or_default(),
+            w.all_live_after_s.map(|t| format!(", all live from {t:.2} s")).unwrap_or_default()
         );
     }
     table += &format!("  (the restart itself — process start until it printed `listening` — took {restart_ms:.0} ms of the `restarted` window's lead-in)\n");
