@@ -219,3 +219,36 @@ impl Drop for Spawned {
         let _ = self.child.wait();
     }
 }
+
+/// Deterministic pseudo-random bytes (xorshift), for garbage-input tests.
+pub fn garbage(n: usize, seed: u64) -> Vec<u8> {
+    let mut x = seed | 1;
+    (0..n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect()
+}
+
+/// Connects to `addr`, sends `payload`, half-closes, and reads whatever comes back until the
+/// peer closes (or 5 s pass). Panics only if nothing accepts the connection at all.
+pub async fn attack(addr: std::net::SocketAddr, payload: &[u8]) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let Ok(Ok(mut s)) = tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr)).await else {
+        panic!("cannot connect to {addr} at all");
+    };
+    let _ = s.write_all(payload).await;
+    let _ = s.shutdown().await;
+    let mut buf = vec![0u8; 64 << 10];
+    let _ = tokio::time::timeout(Duration::from_secs(5), async {
+        while let Ok(n) = s.read(&mut buf).await {
+            if n == 0 {
+                break;
+            }
+        }
+    })
+    .await;
+}

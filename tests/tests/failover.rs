@@ -66,6 +66,9 @@ async fn a_stopped_worker_is_routed_around_and_resumes_when_continued() {
     let (mut c, _) = SessionClient::connect(&cl.server_url(), start_builtin("cornell", 64, 48)).await.unwrap();
     let mut last = Instant::now();
     frames_until(&mut c, &mut last, WAIT, |f, _| f.live_workers == 2).await.expect("both workers live");
+    // Both have answered (so the server knows their round trips).
+    worker_shades(&cl, &mut c, &mut last, 0, 0.0).await;
+    worker_shades(&cl, &mut c, &mut last, 1, 0.0).await;
     let server_metrics = cl.server_metrics_addr().expect("server metrics");
 
     // SIGSTOP: the process and its TCP connections stay, it answers nothing. Only the

@@ -3,11 +3,9 @@
 //! server's gRPC and metrics ports and a worker's gRPC and metrics ports while a session
 //! runs. Afterwards the session still receives frames, a new session starts and shades,
 //! and every metrics endpoint still answers.
-use edgepoint_tests::{cluster_with, frames_until, scrape, start_builtin};
+use edgepoint_tests::{attack, cluster_with, frames_until, garbage, scrape, start_builtin};
 use edgepoint_viewer::client::SessionClient;
-use std::net::SocketAddr;
 use std::time::{Duration, Instant};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 const WAIT: Duration = Duration::from_secs(30);
 const PREFACE: &[u8] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n";
@@ -18,18 +16,6 @@ fn frame_header(len: u32, kind: u8, flags: u8, stream: u32) -> Vec<u8> {
     h.extend([kind, flags]);
     h.extend(stream.to_be_bytes());
     h
-}
-
-fn garbage(n: usize, seed: u64) -> Vec<u8> {
-    let mut x = seed | 1;
-    (0..n)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x as u8
-        })
-        .collect()
 }
 
 /// Every hostile payload, by name.
@@ -67,24 +53,6 @@ fn payloads() -> Vec<(&'static str, Vec<u8>)> {
         ("HTTP/1 with a huge header", [b"GET /metrics HTTP/1.1\r\nX: ".to_vec(), vec![b'a'; 200_000], b"\r\n\r\n".to_vec()].concat()),
         ("nothing", Vec::new()),
     ]
-}
-
-async fn attack(addr: SocketAddr, payload: &[u8]) {
-    let Ok(Ok(mut s)) = tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr)).await else {
-        panic!("cannot connect to {addr} at all");
-    };
-    let _ = s.write_all(payload).await;
-    let _ = s.shutdown().await;
-    // Read whatever the server answers (GOAWAY, 400, nothing) until it closes or we give up.
-    let mut buf = vec![0u8; 64 << 10];
-    let _ = tokio::time::timeout(Duration::from_secs(5), async {
-        while let Ok(n) = s.read(&mut buf).await {
-            if n == 0 {
-                break;
-            }
-        }
-    })
-    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -4,7 +4,7 @@
 //! per server, frame size, message size, time to `start` — each refused with a clear status
 //! while the server goes on serving.
 use edgepoint_proto as pb;
-use edgepoint_tests::{cluster_with, frames_until, metric, scrape, start_builtin, Spawned};
+use edgepoint_tests::{attack, cluster_with, frames_until, garbage, metric, scrape, start_builtin, Spawned};
 use edgepoint_viewer::client::{ConnectOptions, SessionClient};
 use rcgen::{BasicConstraints, CertificateParams, CertifiedIssuer, DnType, IsCa, KeyPair};
 use std::path::{Path, PathBuf};
@@ -175,6 +175,12 @@ async fn tls_protects_the_viewer_port() {
     let e = SessionClient::connect_with(&https, start_builtin("cornell", 64, 48), &wrong_ca).await.expect_err("an unknown CA is refused");
     println!("unknown CA: {e}");
     assert!(e.to_string().to_lowercase().contains("certificate") || e.to_string().contains("cannot connect"), "{e}");
+
+    // Garbage and a truncated TLS ClientHello on the TLS port change nothing.
+    let addr = cl.server_addr();
+    attack(addr, &garbage(4096, 3)).await;
+    attack(addr, &[0x16, 0x03, 0x01, 0x02, 0x00, 0x01, 0x00, 0x01, 0xfc, 0x03, 0x03]).await;
+    attack(addr, b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n").await;
 
     // The viewer binary, as a user runs it against a remote server.
     let out = dir.0.join("frames");

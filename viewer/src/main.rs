@@ -297,6 +297,9 @@ fn run(args: Args) -> Result<()> {
         }
         (None, None) => None,
     };
+    if token.is_some() && args.server.is_none() {
+        tracing::warn!("the token is not used: the local cluster takes none (give --server URL to use it)");
+    }
     let connect = ConnectOptions { token, tls_ca: args.tls_ca.clone(), tls_domain: args.tls_domain.clone() };
     tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
     let connected = rt.block_on(async {

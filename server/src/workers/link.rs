@@ -12,8 +12,9 @@
 //! Every call has a deadline: `LoadScene` and opening the stream have fixed ones, and a
 //! stream whose worker answers nothing for a while with batches in flight (a stopped or
 //! wedged process whose TCP connection stays open) counts as failed — after
-//! [`stall_allowance`], a few round trips but at least `PoolOptions::stall_floor`. HTTP/2
-//! keepalive (set on the channel) catches dead connections underneath.
+//! [`stall_allowance`], a few round trips (the other workers' until this one has answered)
+//! but at least `PoolOptions::stall_floor`. HTTP/2 keepalive (set on the channel) catches
+//! dead connections underneath.
 //!
 //! When the stream fails, stalls, or the worker leaves the pool, the link puts its in-flight
 //! batches back on the retry queue for the other links, and (unless it was stopped) waits —
@@ -353,7 +354,10 @@ async fn stream_once(
         let deadline = if inflight.is_empty() {
             None
         } else {
-            let stall = progress_at + stall_allowance(tuning.rtt, cfg.stall_floor, cfg.stall_cap, cfg.first_answer_timeout);
+            // Before this worker answered anything, the other workers' round trip (doubled:
+            // this one may be slower) is a better guess than the first-answer timeout.
+            let rtt = tuning.rtt.or_else(|| shared.rtt().map(|r| 2.0 * r));
+            let stall = progress_at + stall_allowance(rtt, cfg.stall_floor, cfg.stall_cap, cfg.first_answer_timeout);
             let hard = inflight.oldest_sent().map(|t| t + cfg.batch_deadline).unwrap_or(stall);
             Some(stall.min(hard))
         };
@@ -456,6 +460,7 @@ fn answered(
         Some(r) => 0.8 * r + 0.2 * rtt.as_secs_f64(),
         None => rtt.as_secs_f64(),
     });
+    shared.observe_rtt(rtt);
     let n = b.samples.len() as u64;
     state.samples.fetch_add(n, Ordering::Relaxed);
     member.series.samples.inc_by(n);

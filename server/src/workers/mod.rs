@@ -98,8 +98,8 @@ impl Default for PoolOptions {
         PoolOptions {
             max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
             connect_timeout: Duration::from_secs(2),
-            keepalive_interval: Duration::from_secs(5),
-            keepalive_timeout: Duration::from_secs(10),
+            keepalive_interval: Duration::from_secs(2),
+            keepalive_timeout: Duration::from_secs(5),
             load_timeout: Duration::from_secs(300),
             call_timeout: Duration::from_secs(10),
             stall_floor: Duration::from_secs(1),
@@ -436,6 +436,7 @@ impl WorkerPool {
             live: AtomicUsize::new(0),
             members: AtomicUsize::new(0),
             rate: Mutex::new(RateMeter::new(Duration::from_secs(2))),
+            rtt_bits: AtomicU64::new(0),
             pool: self.core.clone(),
             links: Mutex::new(Vec::new()),
             requeued_batches: AtomicU64::new(0),
@@ -556,6 +557,9 @@ pub(crate) struct Shared {
     pub live: AtomicUsize,
     pub members: AtomicUsize,
     pub rate: Mutex<RateMeter>,
+    /// Smoothed batch round trip over all links, seconds as f64 bits (0 = none yet): the
+    /// prior for a link that has not measured its own.
+    rtt_bits: AtomicU64,
     pool: Arc<PoolCore>,
     pub links: Mutex<Vec<Arc<LinkState>>>,
     pub requeued_batches: AtomicU64,
@@ -583,6 +587,19 @@ impl Shared {
     pub fn push_retry(&self, q: Queued) {
         // Unbounded, and the dispatcher holds a receiver for as long as links run.
         let _ = self.retry_tx.send(q);
+    }
+
+    /// Folds one batch round trip into the dispatcher-wide estimate.
+    pub fn observe_rtt(&self, rtt: Duration) {
+        let old = f64::from_bits(self.rtt_bits.load(Ordering::Relaxed));
+        let new = if old > 0.0 { 0.8 * old + 0.2 * rtt.as_secs_f64() } else { rtt.as_secs_f64() };
+        self.rtt_bits.store(new.to_bits(), Ordering::Relaxed);
+    }
+
+    /// The dispatcher-wide smoothed round trip, once any link measured one.
+    pub fn rtt(&self) -> Option<f64> {
+        let r = f64::from_bits(self.rtt_bits.load(Ordering::Relaxed));
+        (r > 0.0).then_some(r)
     }
 
     pub fn record_samples(&self, now: Instant, n: u64) {
