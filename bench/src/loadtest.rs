@@ -291,6 +291,8 @@ async fn sessions_phase(a: &LoadtestArgs, cluster: &LocalCluster, source: &pb::S
         "server_rss_kib_hwm": hwm,
         "server_rss_kib_mean_middle_third": mid,
         "server_rss_kib_mean_last_third": late,
+        // One reading per second: (seconds into the run, KiB).
+        "server_rss_kib_per_second": rss.iter().step_by(4).map(|r| json!([(r.0 * 10.0).round() / 10.0, r.1])).collect::<Vec<_>>(),
     });
     let table = format!(
         "sessions phase: {} sessions of {}x{} at <= {} fps for {:.0} s\n  fps per session: mean {:.1}, min {:.1}, max {:.1}; frames dropped {}; longest frame gap {:.0} ms\n  server RSS: {} KiB before, peak {} KiB (VmHWM {} KiB), middle third {:.0} KiB, last third {:.0} KiB\n",
