@@ -42,7 +42,7 @@ pub struct SceneArgs {
     #[arg(long, default_value = "direct")]
     pub shader: String,
     /// Shader parameter KEY=VALUE (repeatable), e.g. shadow_rays=16.
-    #[arg(long = "shader-param", value_parser = crate::rays::parse_param)]
+    #[arg(long = "shader-param", value_parser = parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Samples per pixel of the converged reference.
     #[arg(long, default_value_t = 64)]
@@ -86,6 +86,12 @@ pub struct ReferenceArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+fn parse_param(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
+    let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
+    Ok((k.trim().to_string(), v))
 }
 
 fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
