@@ -10,10 +10,15 @@
 //!   speedup over a 1-sample-per-pixel full ray trace with the same workers.
 //! - `throughput`: samples/s of 1..K workers at batch size B, their scaling, and the gRPC
 //!   overhead against calling the shader in-process with the same thread count.
+//! - `loadtest`: K workers at full rate (samples/s, p50/p99 batch latency, scaling 1..K),
+//!   S concurrent sessions (fps per session, dropped frames, server memory), and a worker
+//!   killed/restarted and stopped/continued mid-session (longest frame gaps, rejoin time).
 //! - `load`: scene load (parse + weld + adjacency) and BVH build times.
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 mod frame;
 mod load;
+mod loadtest;
+mod rays;
 mod reference_cache;
 mod stats;
 mod throughput;
@@ -33,6 +38,8 @@ enum Cmd {
     Frame(frame::FrameArgs),
     /// Worker sample throughput for 1..K workers, scaling, and gRPC overhead vs in-process shading.
     Throughput(throughput::ThroughputArgs),
+    /// Load test: workers at full rate, concurrent sessions, failover of a worker mid-session.
+    Loadtest(loadtest::LoadtestArgs),
     /// Scene load, weld and BVH build times.
     Load(load::LoadArgs),
     /// Render the 1-spp and converged reference images of a scene through local workers.
@@ -50,6 +57,7 @@ fn main() -> anyhow::Result<()> {
     match cli.cmd {
         Cmd::Frame(a) => frame::run(a),
         Cmd::Throughput(a) => throughput::run(a),
+        Cmd::Loadtest(a) => loadtest::run(a),
         Cmd::Load(a) => load::run(a),
         Cmd::Reference(a) => frame::run_reference(a),
     }

@@ -2,10 +2,10 @@
 //! shader at batch size B, how that scales from 1 to K workers, and what the gRPC path costs
 //! against calling the same shader in this process with the same number of threads.
 use anyhow::{Context, Result};
-use edgepoint_proto as pb;
 use edgepoint_server::workers::WorkerPool;
 use edgepoint_viewer::client::scene_source_from_arg;
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
+use crate::rays::{to_wire, RayGen};
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
 use serde_json::json;
 use std::collections::HashMap;
@@ -32,7 +32,7 @@ pub struct ThroughputArgs {
     #[arg(long, default_value = "direct")]
     pub shader: String,
     /// Shader parameter KEY=VALUE (repeatable).
-    #[arg(long = "shader-param", value_parser = parse_param)]
+    #[arg(long = "shader-param", value_parser = crate::rays::parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Seconds of shading per measurement.
     #[arg(long, default_value_t = 3.0)]
@@ -44,62 +44,6 @@ pub struct ThroughputArgs {
 
 /// Distinct ray batches the in-process baseline cycles through.
 const PREPARED_BATCHES: usize = 64;
-
-fn parse_param(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
-    Ok((k.trim().to_string(), v.trim().parse().map_err(|_| format!("'{v}' is not a number"))?))
-}
-
-/// Random primary rays through a 512x512 image of the scene camera: the same mix the
-/// renderer requests (sparse pixels all over the image).
-struct RayGen {
-    cam: edgepoint_scene::camera::CameraFrame,
-    state: u64,
-    next_id: u64,
-}
-
-impl RayGen {
-    fn new(camera: &edgepoint_scene::Camera, seed: u64) -> Self {
-        RayGen { cam: camera.frame(512, 512), state: seed | 1, next_id: 0 }
-    }
-    fn uniform(&mut self) -> f32 {
-        // xorshift64*: enough for spreading rays over the image.
-        self.state ^= self.state >> 12;
-        self.state ^= self.state << 25;
-        self.state ^= self.state >> 27;
-        (self.state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn batch(&mut self, n: usize) -> Vec<RayRequest> {
-        (0..n)
-            .map(|_| {
-                let (sx, sy) = (self.uniform() * 512.0, self.uniform() * 512.0);
-                let (origin, direction) = self.cam.ray(sx, sy);
-                self.next_id += 1;
-                RayRequest { id: self.next_id, pixel: [sx as u32, sy as u32], origin, direction }
-            })
-            .collect()
-    }
-}
-
-fn to_wire(id: u64, epoch: u64, shader: &str, params: &HashMap<String, f64>, reqs: Vec<RayRequest>) -> pb::RequestBatch {
-    pb::RequestBatch {
-        batch_id: id,
-        epoch,
-        shader: shader.to_string(),
-        params: params.clone(),
-        seed: id,
-        requests: reqs
-            .into_iter()
-            .map(|r| pb::ShadeRequest {
-                id: r.id,
-                pixel_x: r.pixel[0],
-                pixel_y: r.pixel[1],
-                origin: Some(r.origin.into()),
-                direction: Some(r.direction.into()),
-            })
-            .collect(),
-    }
-}
 
 pub fn run(a: ThroughputArgs) -> Result<()> {
     let source = scene_source_from_arg(&a.scene)?;

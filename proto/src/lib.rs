@@ -18,4 +18,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 mod source;
 pub use source::*;
 
+pub mod auth;
+pub mod metrics_http;
 pub mod net;

@@ -1,21 +1,26 @@
 //! edgepoint renderer library. Folders follow the per-frame pipeline (DESIGN.md):
 //!
+//! - [`cli`] — the `edgepoint-server` command line (shared with the deploy tests).
 //! - [`edges`] — paper 000 §6: discontinuity edges (brute-force finder; the oracle).
 //! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
 //!   occlusion culling, gap-filling interpolation (no networking).
 //! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
 //!   age, dithered selection of the frame's sample budget (no networking).
 //! - [`image_metrics`] — PSNR / SSIM against reference images.
+//! - [`metrics`] — Prometheus metrics of the pool and the sessions (`--metrics-listen`).
 //! - [`stage_times`] — per-stage frame timing (paper Table 2 columns).
-//! - [`workers`] — the shader-worker pool: asynchronous request dispatch with back-pressure.
+//! - [`workers`] — the shader-worker pool: discovery (fixed, DNS, file), asynchronous request
+//!   dispatch with back-pressure, adaptive batch sizes, failure handling.
 //! - [`session`] — one render session per viewer: the frame loop thread.
 //! - [`encode`] — frame encodings (raw, QOI, PNG, JPEG).
 //! - [`reference`] — reference renders (1 spp and converged) through the workers.
 //! - [`service`] — the `Renderer` gRPC service.
 
+pub mod cli;
 pub mod edges;
 pub mod encode;
 pub mod image_metrics;
+pub mod metrics;
 pub mod reference;
 pub mod render_cache;
 pub mod sampling;

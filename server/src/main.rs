@@ -1,42 +1,20 @@
 //! `edgepoint-server`: the renderer process. Serves the `Renderer` gRPC service (one render
 //! session per viewer) and grpc.health.v1, dispatching shading work to the shader workers
-//! given with `--worker`. Prints `listening <addr>` on stdout once bound.
+//! it is given or discovers (see `edgepoint_server::cli`). Prints `metrics <addr>` (with
+//! `--metrics-listen`) and then `listening <addr>` on stdout once bound.
 use clap::Parser;
+use edgepoint_proto::net::{check_exposure, client_tls, server_tls, Protection};
 use edgepoint_proto::renderer_server::RendererServer;
+use edgepoint_server::cli::ServerArgs;
+use edgepoint_server::metrics::ServerMetrics;
 use edgepoint_server::service::{RendererService, ServiceConfig};
-use edgepoint_server::workers::{PoolOptions, WorkerPool};
+use edgepoint_server::workers::{PoolOptions, WorkerPool, WorkerSources};
 use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// The edgepoint renderer: edge-and-point rendering sessions over gRPC, shading on remote
-/// shader workers.
-#[derive(Parser, Debug)]
-#[command(name = "edgepoint-server", version, about)]
-struct Cli {
-    /// Address to listen on (host:port; port 0 picks a free port). The bound address is
-    /// printed on stdout as `listening <addr>`.
-    #[arg(long, default_value = "127.0.0.1:50051")]
-    listen: String,
-
-    /// A shader worker to dispatch to: `http://host:port` or `host:port`. Repeat the flag
-    /// for several workers. Without any, sessions are refused with FAILED_PRECONDITION.
-    #[arg(long = "worker", value_name = "URL")]
-    workers: Vec<String>,
-
-    /// Most render sessions (viewers) served at once; further ones get RESOURCE_EXHAUSTED.
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    max_sessions: u32,
-
-    /// Largest gRPC message in MiB, to and from viewers and workers (a scene travels as the
-    /// bytes of its files in one message).
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=2047))]
-    max_message_mib: u32,
-
-    /// Render Cache size per session, in cached points per image pixel.
-    #[arg(long, default_value_t = edgepoint_server::session::DEFAULT_POINTS_PER_PIXEL)]
-    points_per_pixel: f32,
-}
+/// Concurrent HTTP/2 streams one connection may open (a viewer needs one per session).
+const MAX_STREAMS_PER_CONNECTION: u32 = 64;
 
 fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
@@ -45,7 +23,7 @@ fn main() -> std::process::ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    let cli = Cli::parse();
+    let cli = ServerArgs::parse();
     if !(cli.points_per_pixel.is_finite() && (0.25..=64.0).contains(&cli.points_per_pixel)) {
         eprintln!("error: --points-per-pixel must be in [0.25, 64], got {}", cli.points_per_pixel);
         return std::process::ExitCode::from(2);
@@ -66,33 +44,91 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-async fn run(cli: Cli) -> anyhow::Result<()> {
+async fn run(cli: ServerArgs) -> anyhow::Result<()> {
     let max_message = cli.max_message_mib as usize * (1 << 20);
-    let pool = WorkerPool::with_options(cli.workers.clone(), PoolOptions { max_message_bytes: max_message, ..PoolOptions::default() })?;
-    if pool.is_empty() {
-        tracing::warn!("no --worker given: sessions will be refused until the server is restarted with workers");
+    let tokens = match &cli.token_file {
+        Some(p) => Some(Arc::new(edgepoint_proto::auth::read_token_file(p).map_err(anyhow::Error::msg)?)),
+        None => None,
+    };
+    let tls = match (&cli.tls_cert, &cli.tls_key) {
+        (Some(c), Some(k)) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
+        _ => None,
+    };
+    let worker_tls = if cli.worker_tls_ca.is_some() || cli.worker_tls_domain.is_some() {
+        Some(client_tls(cli.worker_tls_ca.as_deref(), cli.worker_tls_domain.as_deref()).map_err(anyhow::Error::msg)?)
     } else {
-        tracing::info!(workers = ?pool.endpoints(), "shader workers");
+        None
+    };
+
+    // Bind first, so that the exposure check sees the address actually bound.
+    let listener = tokio::net::TcpListener::bind(&cli.listen)
+        .await
+        .map_err(|e| anyhow::anyhow!("cannot listen on {}: {e}", cli.listen))?;
+    let addr = listener.local_addr()?;
+    check_exposure(addr, Protection { tls: tls.is_some(), token: Some(tokens.is_some()), insecure: cli.insecure })
+        .map_err(anyhow::Error::msg)?;
+    if cli.insecure && !edgepoint_proto::net::is_loopback(addr.ip()) && (tls.is_none() || tokens.is_none()) {
+        tracing::warn!(%addr, tls = tls.is_some(), tokens = tokens.is_some(), "--insecure: serving a non-loopback address without full protection");
     }
+
+    let metrics = Arc::new(ServerMetrics::new());
+    let sources = WorkerSources {
+        urls: cli.workers.clone(),
+        dns: cli.worker_dns.clone(),
+        file: cli.workers_file.clone(),
+        interval: Duration::from_millis(cli.discovery_interval_ms),
+    };
+    let opts = PoolOptions {
+        max_message_bytes: max_message,
+        tls: worker_tls,
+        target_batch_time: Duration::from_millis(cli.target_batch_ms),
+        stall_floor: Duration::from_millis(cli.worker_stall_ms),
+        stall_cap: Duration::from_millis(cli.worker_stall_ms).max(Duration::from_secs(10)),
+        metrics: metrics.pool.clone(),
+        ..PoolOptions::default()
+    };
+    let pool = Arc::new(WorkerPool::discover(sources.clone(), opts).await?);
+    if !sources.is_dynamic() && pool.is_empty() {
+        tracing::warn!("no workers given (--worker, --worker-dns or --workers-file): sessions will be refused");
+    } else {
+        tracing::info!(workers = ?pool.endpoints(), dns = ?sources.dns, file = ?sources.file, "shader workers");
+    }
+
+    if let Some(m) = &cli.metrics_listen {
+        let (pool, metrics) = (pool.clone(), metrics.clone());
+        edgepoint_proto::metrics_http::start(
+            m,
+            Arc::new(move || {
+                pool.refresh_metrics();
+                metrics.encode()
+            }),
+        )
+        .await?;
+    }
+
     let service = RendererService::new(
-        Arc::new(pool),
-        ServiceConfig { max_sessions: cli.max_sessions as usize, points_per_pixel: cli.points_per_pixel },
+        pool,
+        ServiceConfig {
+            max_sessions: cli.max_sessions as usize,
+            points_per_pixel: cli.points_per_pixel,
+            max_frame_pixels: cli.max_frame_pixels,
+            max_message_bytes: max_message,
+            tokens: tokens.clone(),
+            start_timeout: Duration::from_secs(cli.start_timeout_secs),
+            metrics: metrics.sessions.clone(),
+        },
     );
     let shutdown = service.shutdown_handle();
 
     let (health_reporter, health_service) = tonic_health::server::health_reporter();
     health_reporter.set_serving::<RendererServer<RendererService>>().await;
 
-    let listener = tokio::net::TcpListener::bind(&cli.listen)
-        .await
-        .map_err(|e| anyhow::anyhow!("cannot listen on {}: {e}", cli.listen))?;
-    let addr = listener.local_addr()?;
     {
         let mut out = std::io::stdout().lock();
         writeln!(out, "listening {addr}")?;
         out.flush()?;
     }
-    tracing::info!(%addr, max_sessions = cli.max_sessions, "renderer serving");
+    tracing::info!(%addr, max_sessions = cli.max_sessions, tls = tls.is_some(), tokens = tokens.as_ref().map_or(0, |t| t.len()), "renderer serving");
 
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let signal_task = tokio::spawn(async move {
@@ -103,7 +139,14 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         let _ = stop_tx.send(());
     });
 
-    let server = tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder()
+        .max_concurrent_streams(Some(MAX_STREAMS_PER_CONNECTION))
+        .http2_keepalive_interval(Some(Duration::from_secs(10)))
+        .http2_keepalive_timeout(Some(Duration::from_secs(20)));
+    if let Some(tls) = tls {
+        builder = builder.tls_config(tls).map_err(|e| anyhow::anyhow!("TLS configuration: {e}"))?;
+    }
+    let server = builder
         .add_service(health_service)
         .add_service(service.into_server(max_message))
         .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), async {

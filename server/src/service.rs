@@ -5,16 +5,26 @@
 //! server answers `started` and then streams frames. Later bad messages are answered with
 //! `rejected` and change nothing. Each session is isolated: its frame loop runs on its own
 //! thread, so a failing session never stops another.
+//!
+//! Remote viewing is guarded here: with tokens configured a session needs
+//! `authorization: Bearer <token>` (else UNAUTHENTICATED); `start` must arrive within
+//! [`ServiceConfig::start_timeout`] (else DEADLINE_EXCEEDED); the frame must fit the server's
+//! pixel limit and, encoded at its worst, the message limit (else RESOURCE_EXHAUSTED); and at
+//! most `max_sessions` run at once (else RESOURCE_EXHAUSTED). Messages above the size limit
+//! are refused by tonic itself (OUT_OF_RANGE). Every refusal is counted by reason in the
+//! metrics, and every sent frame feeds the frame-time and frame-interval histograms.
+use crate::metrics::{Refusal, SessionMetrics};
 use crate::reference::LogProgress;
 use crate::session::{camera_from_wire, camera_to_wire, splitmix64, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
-use crate::workers::WorkerPool;
+use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
+use edgepoint_proto::auth::{constant_time_eq, parse_bearer, AUTHORIZATION};
 use edgepoint_proto::renderer_server::{Renderer, RendererServer};
 use edgepoint_proto::viewer_msg::Msg as ViewerIn;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, Weak};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
@@ -25,18 +35,58 @@ pub const DEFAULT_SHADER: &str = "direct";
 /// How long `start` waits for workers to list their shaders before trusting the name.
 const SHADER_QUERY_TIMEOUT: Duration = Duration::from_secs(2);
 
+/// Default largest frame, in pixels (4096 × 4096).
+pub const DEFAULT_MAX_FRAME_PIXELS: u64 = 4096 * 4096;
+/// Default time a viewer has to send `start` after opening its session stream.
+pub const DEFAULT_START_TIMEOUT: Duration = Duration::from_secs(30);
+/// Worst-case encoded bytes per pixel of any frame encoding (QOI's worst case is 4 bytes per
+/// RGB pixel; raw is 3), plus room for the frame's stats.
+const WORST_BYTES_PER_PIXEL: u64 = 4;
+const FRAME_OVERHEAD_BYTES: u64 = 64 << 10;
+
 /// Service options.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ServiceConfig {
     /// Sessions allowed at once; more are refused with RESOURCE_EXHAUSTED.
     pub max_sessions: usize,
     /// Render Cache size per pixel.
     pub points_per_pixel: f32,
+    /// Largest frame (width × height) a session may ask for; more is RESOURCE_EXHAUSTED.
+    pub max_frame_pixels: u64,
+    /// The message limit the server is built with ([`RendererService::into_server`]); a
+    /// frame that could not fit in it encoded is refused at `start`.
+    pub max_message_bytes: usize,
+    /// Accepted bearer tokens; `None` accepts every viewer (loopback or `--insecure`).
+    pub tokens: Option<Arc<Vec<String>>>,
+    /// Time allowed between opening a session stream and its `start`.
+    pub start_timeout: Duration,
+    pub metrics: Arc<SessionMetrics>,
+}
+
+impl std::fmt::Debug for ServiceConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ServiceConfig")
+            .field("max_sessions", &self.max_sessions)
+            .field("points_per_pixel", &self.points_per_pixel)
+            .field("max_frame_pixels", &self.max_frame_pixels)
+            .field("max_message_bytes", &self.max_message_bytes)
+            .field("tokens", &self.tokens.as_ref().map(|t| format!("{} token(s)", t.len())))
+            .field("start_timeout", &self.start_timeout)
+            .finish()
+    }
 }
 
 impl Default for ServiceConfig {
     fn default() -> Self {
-        ServiceConfig { max_sessions: 16, points_per_pixel: DEFAULT_POINTS_PER_PIXEL }
+        ServiceConfig {
+            max_sessions: 16,
+            points_per_pixel: DEFAULT_POINTS_PER_PIXEL,
+            max_frame_pixels: DEFAULT_MAX_FRAME_PIXELS,
+            max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
+            tokens: None,
+            start_timeout: DEFAULT_START_TIMEOUT,
+            metrics: Arc::new(SessionMetrics::default()),
+        }
     }
 }
 
@@ -56,9 +106,10 @@ struct ServiceState {
 }
 
 /// A session slot; released on drop.
-struct Slot(Arc<ServiceState>);
+struct Slot(Arc<ServiceState>, Arc<SessionMetrics>);
 impl Drop for Slot {
     fn drop(&mut self) {
+        self.1.sessions.dec();
         self.0.active.fetch_sub(1, Ordering::SeqCst);
     }
 }
@@ -99,13 +150,54 @@ impl RendererService {
         RendererServer::new(self).max_decoding_message_size(max_message_bytes).max_encoding_message_size(max_message_bytes)
     }
 
+    /// Checks the viewer's bearer token when tokens are configured.
+    fn authenticate(&self, md: &tonic::metadata::MetadataMap) -> Result<(), Status> {
+        let Some(tokens) = &self.cfg.tokens else { return Ok(()) };
+        let Some(value) = md.get(AUTHORIZATION) else {
+            return Err(Status::unauthenticated(
+                "this server requires a bearer token: give the viewer --token-file FILE (or --token)",
+            ));
+        };
+        let value = value.to_str().map_err(|_| Status::unauthenticated("the authorization header is not ASCII"))?;
+        let token = parse_bearer(value).ok_or_else(|| Status::unauthenticated("the authorization header must be `Bearer <token>`"))?;
+        // Compare against every accepted token, so the time taken does not tell which matched.
+        let ok = tokens.iter().fold(false, |ok, t| ok | constant_time_eq(t, token));
+        if ok {
+            Ok(())
+        } else {
+            Err(Status::unauthenticated("invalid bearer token"))
+        }
+    }
+
+    /// Refuses frames above the pixel limit, or that could not fit in a message encoded.
+    fn check_frame_size(&self, s: &pb::Start) -> Result<(), Status> {
+        let pixels = s.width as u64 * s.height as u64;
+        let max = self.cfg.max_frame_pixels;
+        if pixels > max {
+            return Err(Status::resource_exhausted(format!(
+                "a {}x{} frame has {pixels} pixels, above this server's limit of {max} (--max-frame-pixels)",
+                s.width, s.height
+            )));
+        }
+        let worst = pixels * WORST_BYTES_PER_PIXEL + FRAME_OVERHEAD_BYTES;
+        let limit = self.cfg.max_message_bytes as u64;
+        if worst > limit {
+            return Err(Status::resource_exhausted(format!(
+                "a {}x{} frame may take {worst} bytes encoded, above this server's message limit of {limit} bytes (--max-message-mib)",
+                s.width, s.height
+            )));
+        }
+        Ok(())
+    }
+
     fn acquire_slot(&self) -> Result<Slot, Status> {
         let max = self.cfg.max_sessions;
         self.state
             .active
             .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < max).then_some(n + 1))
             .map_err(|n| Status::resource_exhausted(format!("{n} sessions running, the limit is {max} (--max-sessions)")))?;
-        Ok(Slot(self.state.clone()))
+        self.cfg.metrics.sessions.inc();
+        Ok(Slot(self.state.clone(), self.cfg.metrics.clone()))
     }
 }
 
@@ -182,12 +274,30 @@ impl Renderer for RendererService {
     type SessionStream = ReceiverStream<Result<pb::ServerMsg, Status>>;
 
     async fn session(&self, request: Request<Streaming<pb::ViewerMsg>>) -> Result<Response<Self::SessionStream>, Status> {
+        let r = self.open_session(request).await;
+        match &r {
+            Ok(_) => self.cfg.metrics.started.inc(),
+            Err(s) => {
+                self.cfg.metrics.refuse(Refusal::of(s.code()));
+                tracing::info!(code = ?s.code(), "session refused: {}", s.message());
+            }
+        }
+        r
+    }
+}
+
+impl RendererService {
+    async fn open_session(&self, request: Request<Streaming<pb::ViewerMsg>>) -> Result<Response<ReceiverStream<Result<pb::ServerMsg, Status>>>, Status> {
         let peer = request.remote_addr();
+        self.authenticate(request.metadata())?;
         let mut inbound = request.into_inner();
         if self.state.shutting_down.load(Ordering::SeqCst) {
             return Err(Status::unavailable("the renderer is shutting down"));
         }
-        let start = match inbound.message().await? {
+        let first = tokio::time::timeout(self.cfg.start_timeout, inbound.message()).await.map_err(|_| {
+            Status::deadline_exceeded(format!("no `start` message within {:?} of opening the session", self.cfg.start_timeout))
+        })?;
+        let start = match first? {
             Some(pb::ViewerMsg { msg: Some(ViewerIn::Start(s)) }) => s,
             Some(other) => {
                 let what = match other.msg {
@@ -201,9 +311,12 @@ impl Renderer for RendererService {
             None => return Err(invalid("the stream ended before `start`")),
         };
         if self.pool.is_empty() {
-            return Err(Status::failed_precondition("no shader workers configured (start the server with --worker URL)"));
+            return Err(Status::failed_precondition(
+                "no shader workers available (give the server --worker URL, --worker-dns HOST:PORT or --workers-file FILE, and check that they run)",
+            ));
         }
         let checked = check_start(&start)?;
+        self.check_frame_size(&start)?;
         if let Some(shaders) = self.pool.shaders(SHADER_QUERY_TIMEOUT).await {
             if !shaders.contains(&checked.shader) {
                 return Err(invalid(format!("unknown shader '{}' (the workers offer: {})", checked.shader, shaders.join(", "))));
@@ -300,15 +413,20 @@ impl Renderer for RendererService {
         // Frame loop → viewer, one message in flight: a slow viewer makes the frame loop
         // replace frames rather than queue them.
         let (tx, rx) = tokio::sync::mpsc::channel(1);
+        let metrics = self.cfg.metrics.clone();
         tokio::spawn(async move {
             let session = session; // dropped (closing the frame loop) when this task ends
             if tx.send(Ok(started)).await.is_err() {
                 return;
             }
+            let mut frames = FrameMeter::default();
             loop {
                 tokio::select! {
                     m = output.next() => match m {
                         Some(m) => {
+                            if let Some(pb::server_msg::Msg::Frame(f)) = &m.msg {
+                                frames.sent(f, &metrics);
+                            }
                             if tx.send(Ok(m)).await.is_err() {
                                 break;
                             }
@@ -322,6 +440,29 @@ impl Renderer for RendererService {
             drop(session);
         });
         Ok(Response::new(ReceiverStream::new(rx)))
+    }
+}
+
+/// Feeds one session's sent frames into the metrics.
+#[derive(Default)]
+struct FrameMeter {
+    last: Option<Instant>,
+    dropped: u64,
+}
+
+impl FrameMeter {
+    fn sent(&mut self, f: &pb::Frame, m: &SessionMetrics) {
+        let now = Instant::now();
+        m.frames.inc();
+        if f.total_ms.is_finite() && f.total_ms >= 0.0 {
+            m.frame_seconds.observe(f.total_ms / 1e3);
+        }
+        if let Some(last) = self.last.replace(now) {
+            m.frame_interval_seconds.observe(now.duration_since(last).as_secs_f64());
+        }
+        // `frames_dropped` is the session's running count.
+        m.frames_dropped.inc_by(f.frames_dropped.saturating_sub(self.dropped));
+        self.dropped = self.dropped.max(f.frames_dropped);
     }
 }
 
@@ -350,5 +491,57 @@ mod tests {
         assert!(check_start(&pb::Start { settings: Some(bad_settings), ..start() }).unwrap_err().message().contains("sparseness"));
         let params = HashMap::from([("ambient".to_string(), f64::NAN)]);
         assert!(check_start(&pb::Start { shader_params: params, ..start() }).unwrap_err().message().contains("ambient"));
+    }
+
+    fn service(cfg: ServiceConfig) -> RendererService {
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let pool = rt.block_on(async { WorkerPool::new(vec![]).unwrap() });
+        RendererService::new(Arc::new(pool), cfg)
+    }
+
+    #[test]
+    fn tokens_are_checked_and_refusals_explain_themselves() {
+        let svc = service(ServiceConfig { tokens: Some(Arc::new(vec!["old-token-0123456789".into(), "new-token-0123456789".into()])), ..Default::default() });
+        let md = |v: Option<&str>| {
+            let mut m = tonic::metadata::MetadataMap::new();
+            if let Some(v) = v {
+                m.insert(AUTHORIZATION, v.parse().unwrap());
+            }
+            m
+        };
+        assert!(svc.authenticate(&md(Some("Bearer new-token-0123456789"))).is_ok());
+        assert!(svc.authenticate(&md(Some("bearer old-token-0123456789"))).is_ok(), "rotation: both accepted");
+        for (v, why) in [(None, "requires a bearer token"), (Some("Bearer nope-0123456789012"), "invalid"), (Some("Basic abc"), "Bearer <token>")] {
+            let e = svc.authenticate(&md(v)).unwrap_err();
+            assert_eq!(e.code(), tonic::Code::Unauthenticated);
+            assert!(e.message().contains(why), "{v:?}: {}", e.message());
+        }
+        let open = service(ServiceConfig::default());
+        assert!(open.authenticate(&md(None)).is_ok(), "no tokens configured: open");
+    }
+
+    #[test]
+    fn frames_must_fit_the_pixel_and_message_limits() {
+        let svc = service(ServiceConfig { max_frame_pixels: 1000, max_message_bytes: 1 << 20, ..Default::default() });
+        assert!(svc.check_frame_size(&pb::Start { width: 40, height: 25, ..start() }).is_ok());
+        let e = svc.check_frame_size(&pb::Start { width: 40, height: 26, ..start() }).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+        assert!(e.message().contains("--max-frame-pixels") && e.message().contains("1040"), "{}", e.message());
+        let small = service(ServiceConfig { max_message_bytes: 200 << 10, ..Default::default() });
+        let e = small.check_frame_size(&pb::Start { width: 256, height: 256, ..start() }).unwrap_err();
+        assert!(e.message().contains("--max-message-mib"), "{}", e.message());
+    }
+
+    #[test]
+    fn frame_meter_counts_drops_as_deltas() {
+        let m = SessionMetrics::default();
+        let mut meter = FrameMeter::default();
+        for (dropped, ms) in [(0, 5.0), (3, 6.0), (3, f64::NAN), (7, 4.0)] {
+            meter.sent(&pb::Frame { frames_dropped: dropped, total_ms: ms, ..Default::default() }, &m);
+        }
+        assert_eq!(m.frames.get(), 4);
+        assert_eq!(m.frames_dropped.get(), 7);
+        assert_eq!(m.frame_seconds.get_sample_count(), 3, "a NaN frame time is not observed");
+        assert_eq!(m.frame_interval_seconds.get_sample_count(), 3);
     }
 }

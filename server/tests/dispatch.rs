@@ -7,10 +7,10 @@
 use edgepoint_proto as pb;
 use edgepoint_proto::shade_in::Msg as In;
 use edgepoint_proto::shader_worker_server::{ShaderWorker, ShaderWorkerServer};
-use edgepoint_server::workers::{Answer, DispatchError, PoolOptions, WorkerPool};
+use edgepoint_server::workers::{Answer, DispatchError, PoolOptions, Resolve, WorkerPool, WorkerSources};
 use glam::{Affine3A, Vec3};
 use std::collections::{BTreeMap, HashMap};
-use std::sync::atomic::{AtomicI64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_stream::wrappers::{ReceiverStream, TcpListenerStream};
@@ -23,6 +23,13 @@ struct Script {
     loads: AtomicUsize,
     batches: AtomicUsize,
     delay_ms: u64,
+    /// Extra shading time per request, in microseconds.
+    per_request_us: u64,
+    /// While set, batches are read but never answered (the stream and connection stay up,
+    /// as with a wedged process).
+    hang: AtomicBool,
+    /// Smallest batch seen.
+    min_batch: AtomicUsize,
 }
 
 struct ScriptedWorker {
@@ -79,8 +86,13 @@ impl ShaderWorker for ScriptedWorker {
                             let _ = tx.send(Err(Status::unavailable("scripted failure"))).await;
                             return;
                         }
-                        if script.delay_ms > 0 {
-                            tokio::time::sleep(Duration::from_millis(script.delay_ms)).await;
+                        if script.hang.load(Ordering::SeqCst) {
+                            continue;
+                        }
+                        script.min_batch.fetch_min(b.requests.len(), Ordering::SeqCst);
+                        let delay = Duration::from_millis(script.delay_ms) + Duration::from_micros(script.per_request_us * b.requests.len() as u64);
+                        if !delay.is_zero() {
+                            tokio::time::sleep(delay).await;
                         }
                         script.batches.fetch_add(1, Ordering::SeqCst);
                         let x0 = t
@@ -121,7 +133,11 @@ impl ShaderWorker for ScriptedWorker {
 }
 
 async fn spawn_worker(hash: &str, script: Arc<Script>) -> String {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    spawn_worker_on(hash, script, "127.0.0.1:0").await
+}
+
+async fn spawn_worker_on(hash: &str, script: Arc<Script>, addr: &str) -> String {
+    let listener = tokio::net::TcpListener::bind(addr).await.unwrap();
     let addr = listener.local_addr().unwrap();
     let svc = ShaderWorkerServer::new(ScriptedWorker { hash: hash.to_string(), script });
     tokio::spawn(tonic::transport::Server::builder().add_service(svc).serve_with_incoming(TcpListenerStream::new(listener)));
@@ -153,7 +169,7 @@ fn batch(id: u64, epoch: u64, n: u64) -> pb::RequestBatch {
 }
 
 fn script(fail_after: i64, delay_ms: u64) -> Arc<Script> {
-    Arc::new(Script { fail_after: AtomicI64::new(fail_after), delay_ms, ..Default::default() })
+    Arc::new(Script { fail_after: AtomicI64::new(fail_after), delay_ms, min_batch: AtomicUsize::new(usize::MAX), ..Default::default() })
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -248,7 +264,7 @@ async fn an_unsendable_old_epoch_is_dropped_and_counted_answered() {
     d.shade_all([batch(1, 1, 3)], 1, Duration::from_secs(10), |_| {}).await.unwrap();
     assert!(d.submit(batch(2, 0, 3)));
     let ans = tokio::time::timeout(Duration::from_secs(10), d.next_answer()).await.unwrap().unwrap();
-    assert!(matches!(ans, Answer::Dropped { batch_id: 2, epoch: 0 }), "{ans:?}");
+    assert!(matches!(ans, Answer::Dropped { batch_id: 2, epoch: 0, .. }), "{ans:?}");
     assert_eq!(d.outstanding_requests(), 0, "a dropped batch does not leak outstanding requests");
     assert_eq!(d.stats().dropped_batches, 1);
 }
@@ -275,4 +291,128 @@ async fn queue_refuses_when_full_and_unreachable_workers_stall_cleanly() {
     assert!(matches!(r, Err(DispatchError::Stalled { live: 0, workers: 1, .. })), "{r:?}");
     assert!(WorkerPool::new(vec!["not a url at all".into()]).is_err());
     assert!(WorkerPool::new(vec!["http://".into()]).is_err());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_worker_gets_smaller_batches_and_every_request_is_answered_once() {
+    let (src, hash) = source();
+    let fast = Arc::new(Script { per_request_us: 100, ..Arc::try_unwrap(script(-1, 0)).ok().unwrap() });
+    let slow = Arc::new(Script { per_request_us: 2000, ..Arc::try_unwrap(script(-1, 0)).ok().unwrap() });
+    let urls = vec![spawn_worker(&hash, fast.clone()).await, spawn_worker(&hash, slow.clone()).await];
+    let opts = PoolOptions { target_batch_time: Duration::from_millis(20), min_batch: 4, ..Default::default() };
+    let pool = WorkerPool::with_options(urls, opts).unwrap();
+    let d = pool.open(src, hash);
+    let mut seen: HashMap<u64, usize> = HashMap::new();
+    d.shade_all((0..200).map(|i| batch(i, 0, 64)), 8, Duration::from_secs(20), |sb| {
+        for s in &sb.samples {
+            assert_eq!(s.id / 1000, sb.batch_id, "parts keep their batch id");
+            *seen.entry(s.id).or_insert(0) += 1;
+        }
+    })
+    .await
+    .unwrap();
+    assert_eq!(seen.len(), 200 * 64, "every request of every batch answered");
+    assert!(seen.values().all(|&n| n == 1), "no request answered twice");
+    assert_eq!((d.outstanding_requests(), d.outstanding_batches()), (0, 0));
+    // 2 ms per request at 20 ms per batch: about 10 requests per batch for the slow worker.
+    let small = slow.min_batch.load(Ordering::SeqCst);
+    assert!(small < 64, "the slow worker got split batches (smallest {small})");
+    let status = d.worker_status();
+    let slow_status = status.iter().find(|w| w.samples_per_busy_second > 0.0 && w.samples_per_busy_second < 2000.0).expect("slow worker measured");
+    assert!(slow_status.batch_size < 64, "{status:?}");
+    let fast_status = status.iter().find(|w| w.url != slow_status.url).unwrap();
+    assert!(fast_status.samples > slow_status.samples, "the fast worker shaded more: {status:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_worker_hands_its_batches_to_the_other() {
+    let (src, hash) = source();
+    let (a, b) = (script(-1, 1), script(-1, 1));
+    let urls = vec![spawn_worker(&hash, a.clone()).await, spawn_worker(&hash, b.clone()).await];
+    let opts = PoolOptions { stall_floor: Duration::from_millis(300), first_answer_timeout: Duration::from_secs(2), ..Default::default() };
+    let pool = WorkerPool::with_options(urls, opts).unwrap();
+    let d = pool.open(src, hash);
+    // Warm up both links, then wedge A: its connection stays up, it just never answers.
+    d.shade_all((0..20).map(|i| batch(i, 0, 4)), 8, Duration::from_secs(10), |_| {}).await.unwrap();
+    a.hang.store(true, Ordering::SeqCst);
+    let mut seen = HashMap::new();
+    d.shade_all((100..200).map(|i| batch(i, 0, 4)), 16, Duration::from_secs(20), |sb| {
+        *seen.entry(sb.batch_id).or_insert(0) += 1;
+    })
+    .await
+    .unwrap();
+    assert_eq!(seen.len(), 100, "every batch answered despite the wedged worker");
+    assert!(seen.values().all(|&n| n == 1));
+    assert!(d.stats().requeued_batches > 0, "the wedged worker's batches were re-issued");
+    let failures: u64 = d.worker_status().iter().map(|w| w.failures).sum();
+    assert!(failures > 0, "the stall counts as a failure");
+}
+
+/// Answers a name from a table the test edits.
+#[derive(Default)]
+struct Dns(std::sync::Mutex<Vec<std::net::IpAddr>>);
+impl Resolve for Dns {
+    fn lookup<'a>(
+        &'a self,
+        _host: &'a str,
+        _port: u16,
+    ) -> std::pin::Pin<Box<dyn std::future::Future<Output = std::io::Result<Vec<std::net::IpAddr>>> + Send + 'a>> {
+        let ips = self.0.lock().unwrap().clone();
+        Box::pin(async move { Ok(ips) })
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn workers_found_by_dns_join_and_leave_while_dispatching() {
+    let (src, hash) = source();
+    // Two workers on one port at two loopback addresses: one DNS name, two records.
+    let (a, b) = (script(-1, 1), script(-1, 1));
+    let first = spawn_worker_on(&hash, a.clone(), "127.0.0.1:0").await;
+    let port: u16 = first.rsplit(':').next().unwrap().parse().unwrap();
+    let Ok(l) = std::net::TcpListener::bind(("127.0.0.2", port)) else {
+        eprintln!("127.0.0.2:{port} is not available here; skipping");
+        return;
+    };
+    drop(l);
+    spawn_worker_on(&hash, b.clone(), &format!("127.0.0.2:{port}")).await;
+    let dns = Arc::new(Dns::default());
+    *dns.0.lock().unwrap() = vec!["127.0.0.1".parse().unwrap()];
+    let sources = WorkerSources { dns: vec![format!("workers.test:{port}")], interval: Duration::from_millis(100), ..Default::default() };
+    let pool = WorkerPool::discover_with(sources, PoolOptions::default(), dns.clone()).await.unwrap();
+    assert_eq!(pool.endpoints(), [format!("http://127.0.0.1:{port}")]);
+    let d = pool.open(src, hash);
+    let mut seen = HashMap::new();
+    let mut next = 0u64;
+    let mut run = |n: u64| {
+        let ids = next..next + n;
+        next += n;
+        ids.map(|i| batch(i, 0, 4)).collect::<Vec<_>>()
+    };
+    d.shade_all(run(30), 8, Duration::from_secs(10), |sb| *seen.entry(sb.batch_id).or_insert(0) += 1).await.unwrap();
+    assert_eq!(b.batches.load(Ordering::SeqCst), 0, "B is not in the pool yet");
+    // Scale up: B appears in DNS and takes work.
+    dns.0.lock().unwrap().push("127.0.0.2".parse().unwrap());
+    let t = std::time::Instant::now();
+    while d.live_workers() < 2 {
+        assert!(t.elapsed() < Duration::from_secs(20), "B did not join");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(d.workers(), 2);
+    d.shade_all(run(100), 16, Duration::from_secs(10), |sb| *seen.entry(sb.batch_id).or_insert(0) += 1).await.unwrap();
+    assert!(b.batches.load(Ordering::SeqCst) > 0, "the new worker shades");
+    // Scale down while batches are in flight: A leaves, its batches go to B.
+    let before_a = a.batches.load(Ordering::SeqCst);
+    *dns.0.lock().unwrap() = vec!["127.0.0.2".parse().unwrap()];
+    d.shade_all(run(100), 16, Duration::from_secs(10), |sb| *seen.entry(sb.batch_id).or_insert(0) += 1).await.unwrap();
+    while d.workers() > 1 {
+        assert!(t.elapsed() < Duration::from_secs(30), "A did not leave");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let a_after_leave = a.batches.load(Ordering::SeqCst);
+    d.shade_all(run(50), 16, Duration::from_secs(10), |sb| *seen.entry(sb.batch_id).or_insert(0) += 1).await.unwrap();
+    assert_eq!(a.batches.load(Ordering::SeqCst), a_after_leave, "a departed worker gets nothing");
+    assert!(a_after_leave >= before_a);
+    assert_eq!(seen.len(), 280);
+    assert!(seen.values().all(|&n| n == 1), "no batch lost or doubled across joins and leaves");
+    assert_eq!(pool.endpoints(), [format!("http://127.0.0.2:{port}")]);
 }

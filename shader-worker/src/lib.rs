@@ -1,7 +1,10 @@
 //! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
-//! ray requests ([`shade`]) and serves them over gRPC ([`service`]).
+//! ray requests ([`shade`]) and serves them over gRPC ([`service`]), with its command line in
+//! [`cli`] and its Prometheus metrics in [`metrics`].
 pub mod bvh;
+pub mod cli;
 pub mod loaded;
+pub mod metrics;
 mod rng;
 pub mod service;
 pub mod shade;

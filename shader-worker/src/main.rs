@@ -1,27 +1,17 @@
 //! `edgepoint-worker`: the shader-worker process. Serves the `ShaderWorker` gRPC service and
-//! grpc.health.v1, prints `listening <addr>` on stdout once bound, logs to stderr.
+//! grpc.health.v1, prints `metrics <addr>` (with `--metrics-listen`) and then
+//! `listening <addr>` on stdout once bound, logs to stderr. See `edgepoint_worker::cli`.
 use clap::Parser;
+use edgepoint_proto::net::{check_exposure, server_tls, Protection};
 use edgepoint_proto::shader_worker_server::ShaderWorkerServer;
+use edgepoint_worker::cli::WorkerArgs;
 use edgepoint_worker::service::WorkerService;
 use std::io::Write;
+use std::sync::Arc;
+use std::time::Duration;
 
-#[derive(Parser, Debug)]
-#[command(name = "edgepoint-worker", version, about = "edgepoint shader worker: shades batches of ray requests for the renderer over gRPC")]
-struct Args {
-    /// Address to listen on (port 0 picks a free port; the bound address is printed on
-    /// stdout as `listening <addr>`).
-    #[arg(long, default_value = "127.0.0.1:50061")]
-    listen: String,
-    /// Shading threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
-    /// Scenes kept loaded (least recently used ones are dropped first).
-    #[arg(long, default_value_t = 4)]
-    scene_cache: usize,
-    /// Largest gRPC message accepted or sent, in MiB (scenes travel as bytes).
-    #[arg(long, default_value_t = 256)]
-    max_message_mib: usize,
-}
+/// After SIGTERM, how long streams get to drain before the process exits regardless.
+const DRAIN_GRACE: Duration = Duration::from_secs(10);
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
@@ -29,29 +19,63 @@ async fn main() -> anyhow::Result<()> {
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
         .init();
-    let args = Args::parse();
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
-    if threads == 0 {
-        anyhow::bail!("--threads must be at least 1");
-    }
-    let service = WorkerService::new(args.scene_cache, threads)?;
+    let args = WorkerArgs::parse();
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let tls = match (&args.tls_cert, &args.tls_key) {
+        (Some(c), Some(k)) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
+        _ => None,
+    };
+    let service = WorkerService::new(args.scene_cache as usize, threads)?;
     let listener = tokio::net::TcpListener::bind(&args.listen)
         .await
         .map_err(|e| anyhow::anyhow!("cannot listen on {}: {e}", args.listen))?;
     let addr = listener.local_addr()?;
+    check_exposure(addr, Protection { tls: tls.is_some(), token: None, insecure: args.insecure }).map_err(anyhow::Error::msg)?;
+
+    if let Some(m) = &args.metrics_listen {
+        let (metrics, cache) = (service.metrics().clone(), service.cache().clone());
+        edgepoint_proto::metrics_http::start(
+            m,
+            Arc::new(move || {
+                metrics.scenes.set(cache.hashes().len() as i64);
+                metrics.encode()
+            }),
+        )
+        .await?;
+    }
     println!("listening {addr}");
     std::io::stdout().flush()?;
-    tracing::info!(%addr, threads, "edgepoint-worker serving");
+    tracing::info!(%addr, threads, tls = tls.is_some(), "edgepoint-worker serving");
 
     let (health, health_service) = tonic_health::server::health_reporter();
     health.set_serving::<ShaderWorkerServer<WorkerService>>().await;
-    let max = args.max_message_mib.saturating_mul(1 << 20);
-    tonic::transport::Server::builder()
-        .http2_keepalive_interval(Some(std::time::Duration::from_secs(10)))
+    let max = (args.max_message_mib as usize).saturating_mul(1 << 20);
+    let drain = service.drain_handle();
+    let (stopping_tx, stopping_rx) = tokio::sync::oneshot::channel::<()>();
+    let signal = async move {
+        shutdown().await;
+        tracing::info!("shutting down: finishing the batches in progress");
+        health.set_not_serving::<ShaderWorkerServer<WorkerService>>().await;
+        drain.drain();
+        let _ = stopping_tx.send(());
+    };
+    let mut builder = tonic::transport::Server::builder()
+        .http2_keepalive_interval(Some(Duration::from_secs(10)))
+        .http2_keepalive_timeout(Some(Duration::from_secs(20)));
+    if let Some(tls) = tls {
+        builder = builder.tls_config(tls).map_err(|e| anyhow::anyhow!("TLS configuration: {e}"))?;
+    }
+    let server = builder
         .add_service(health_service)
         .add_service(ShaderWorkerServer::new(service).max_decoding_message_size(max).max_encoding_message_size(max))
-        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), shutdown())
-        .await?;
+        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), signal);
+    tokio::select! {
+        r = server => r?,
+        _ = async {
+            let _ = stopping_rx.await;
+            tokio::time::sleep(DRAIN_GRACE).await;
+        } => tracing::warn!("streams did not drain within {DRAIN_GRACE:?}; exiting"),
+    }
     tracing::info!("edgepoint-worker stopped");
     Ok(())
 }

@@ -6,7 +6,12 @@
 //! stream keeps reading, up to [`PIPELINE`] batches at once, so a client with several
 //! batches in flight keeps every core busy. A batch for an epoch never sent on the stream
 //! ends the stream with FAILED_PRECONDITION: a wrong transform would be a wrong sample.
+//!
+//! Draining ([`DrainHandle::drain`], on SIGTERM): every stream stops reading, finishes the
+//! batches it is shading, sends their samples and ends with UNAVAILABLE, so the renderer
+//! re-issues whatever it still had queued here to other workers and nothing is lost.
 use crate::loaded::LoadedScene;
+use crate::metrics::WorkerMetrics;
 use crate::shade::{shade_batch, RayRequest, ShaderSpec, SHADERS};
 use crate::Instances;
 use edgepoint_proto::shader_worker_server::ShaderWorker;
@@ -16,7 +21,7 @@ use std::collections::BTreeMap;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tokio::sync::{mpsc, OnceCell, Semaphore};
+use tokio::sync::{mpsc, watch, OnceCell, Semaphore};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
@@ -75,6 +80,18 @@ impl SceneCache {
 pub struct WorkerService {
     cache: Arc<SceneCache>,
     pool: Arc<rayon::ThreadPool>,
+    metrics: WorkerMetrics,
+    draining: Arc<watch::Sender<bool>>,
+}
+
+/// Ends a worker's streams gracefully (see the module docs).
+#[derive(Clone)]
+pub struct DrainHandle(Arc<watch::Sender<bool>>);
+
+impl DrainHandle {
+    pub fn drain(&self) {
+        self.0.send_replace(true);
+    }
 }
 
 impl WorkerService {
@@ -83,11 +100,33 @@ impl WorkerService {
             .num_threads(threads)
             .thread_name(|i| format!("shade-{i}"))
             .build()?;
-        Ok(WorkerService { cache: Arc::new(SceneCache::new(cache_entries)), pool: Arc::new(pool) })
+        Ok(WorkerService {
+            cache: Arc::new(SceneCache::new(cache_entries)),
+            pool: Arc::new(pool),
+            metrics: WorkerMetrics::new(),
+            draining: Arc::new(watch::channel(false).0),
+        })
     }
 
     pub fn cache(&self) -> &Arc<SceneCache> {
         &self.cache
+    }
+
+    /// The worker's metrics (counted always; exported by `--metrics-listen`).
+    pub fn metrics(&self) -> &WorkerMetrics {
+        &self.metrics
+    }
+
+    pub fn drain_handle(&self) -> DrainHandle {
+        DrainHandle(self.draining.clone())
+    }
+}
+
+/// Counts a stream as open while it lives.
+struct StreamGauge(prometheus::IntGauge);
+impl Drop for StreamGauge {
+    fn drop(&mut self) {
+        self.0.dec();
     }
 }
 
@@ -204,8 +243,10 @@ impl ShaderWorker for WorkerService {
         let (cell, was_cached) = self.cache.cell(&hash);
         let t = Instant::now();
         let h2 = hash.clone();
+        let loads = self.metrics.scene_loads.clone();
         let loaded = cell
             .get_or_init(|| async move {
+                loads.inc();
                 let what = edgepoint_proto::describe_source(&source);
                 tracing::info!(scene = %what, hash = %h2, "loading scene");
                 let built = tokio::task::spawn_blocking(move || {
@@ -244,7 +285,11 @@ impl ShaderWorker for WorkerService {
         let (tx, rx) = mpsc::channel::<Result<pb::ShadeOut, Status>>(PIPELINE + 1);
         let cache = self.cache.clone();
         let pool = self.pool.clone();
+        let metrics = self.metrics.clone();
+        let mut drain = self.draining.subscribe();
         tokio::spawn(async move {
+            metrics.streams.inc();
+            let _open = StreamGauge(metrics.streams.clone());
             let scene = match inbound.message().await {
                 Ok(Some(pb::ShadeIn { msg: Some(shade_in::Msg::Open(o)) })) => match cache.get(&o.scene_hash) {
                     Some(s) => s,
@@ -267,13 +312,25 @@ impl ShaderWorker for WorkerService {
             let mut epochs = StreamEpochs::new(&scene);
             let permits = Arc::new(Semaphore::new(PIPELINE));
             loop {
-                let msg = match inbound.message().await {
-                    Ok(Some(m)) => m,
-                    Ok(None) | Err(_) => break,
+                let msg = tokio::select! {
+                    m = inbound.message() => match m {
+                        Ok(Some(m)) => m,
+                        Ok(None) | Err(_) => break,
+                    },
+                    _ = async { drain.wait_for(|d| *d).await.map(|_| ()) } => {
+                        // Finish the batches shading (each holds its permit until its
+                        // samples are queued for sending), then end the stream.
+                        let _ = permits.acquire_many(PIPELINE as u32).await;
+                        metrics.stream_errors.inc();
+                        let _ = tx.send(Err(Status::unavailable("the worker is shutting down; re-issue the rest elsewhere"))).await;
+                        break;
+                    }
                 };
                 let fail = |s: Status| {
                     let tx = tx.clone();
+                    let errors = metrics.stream_errors.clone();
                     async move {
+                        errors.inc();
                         let _ = tx.send(Err(s)).await;
                     }
                 };
@@ -309,21 +366,34 @@ impl ShaderWorker for WorkerService {
                                 break;
                             }
                         };
-                        let Ok(permit) = permits.clone().acquire_owned().await else { break };
-                        let (scene, pool, tx) = (scene.clone(), pool.clone(), tx.clone());
+                        metrics.waiting.inc();
+                        let permit = permits.clone().acquire_owned().await;
+                        metrics.waiting.dec();
+                        let Ok(permit) = permit else { break };
+                        let (scene, pool, tx, m) = (scene.clone(), pool.clone(), tx.clone(), metrics.clone());
                         tokio::spawn(async move {
                             let t = Instant::now();
+                            m.shading.inc();
                             let out = tokio::task::spawn_blocking(move || {
                                 let out = pool.install(|| shade_batch(&scene, &inst, &spec, b.seed, &reqs));
                                 samples_to_wire(&b, out, t.elapsed().as_secs_f64() * 1e3)
                             })
                             .await;
-                            drop(permit);
+                            m.shading.dec();
                             let msg = match out {
-                                Ok(batch) => Ok(pb::ShadeOut { msg: Some(shade_out::Msg::Samples(batch)) }),
+                                Ok(batch) => {
+                                    m.batches.inc();
+                                    m.samples.inc_by(batch.samples.len() as u64);
+                                    m.nonfinite.inc_by(batch.nonfinite as u64);
+                                    m.batch_seconds.observe(batch.shade_ms / 1e3);
+                                    Ok(pb::ShadeOut { msg: Some(shade_out::Msg::Samples(batch)) })
+                                }
                                 Err(e) => Err(Status::internal(format!("shading failed: {e}"))),
                             };
                             let _ = tx.send(msg).await;
+                            // Held until the samples are queued, so a draining stream sends
+                            // them before it ends.
+                            drop(permit);
                         });
                     }
                     Some(shade_in::Msg::Open(_)) => {

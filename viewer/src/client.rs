@@ -4,7 +4,7 @@
 //! Also turns a `--scene` argument into the wire `SceneSource` (built-in name or files).
 use anyhow::{bail, Context};
 use edgepoint_proto::{self as pb, renderer_client::RendererClient, server_msg, viewer_msg};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio_stream::wrappers::UnboundedReceiverStream;
@@ -43,6 +43,16 @@ impl ClientError {
     fn from_status(s: tonic::Status) -> Self {
         ClientError::Status { code: s.code(), message: s.message().to_string() }
     }
+}
+
+/// How to reach a server beyond its URL: a bearer token (servers started with
+/// `--token-file` require one) and, for an `https://` URL, the CA to trust and the name to
+/// check (default: the web PKI roots and the URL's host).
+#[derive(Debug, Clone, Default)]
+pub struct ConnectOptions {
+    pub token: Option<String>,
+    pub tls_ca: Option<PathBuf>,
+    pub tls_domain: Option<String>,
 }
 
 /// What the server sends after `started`.
@@ -96,11 +106,41 @@ impl SessionClient {
     /// `started`. A refused start comes back as [`ClientError::Status`] with the server's
     /// code and message (e.g. `INVALID_ARGUMENT: bunny.ply: face 12: ...`).
     pub async fn connect(url: &str, start: pb::Start) -> Result<(SessionClient, pb::Started), ClientError> {
+        Self::connect_with(url, start, &ConnectOptions::default()).await
+    }
+
+    /// [`SessionClient::connect`] with a token and TLS settings. A token the server does not
+    /// accept comes back as [`ClientError::Status`] with code UNAUTHENTICATED.
+    pub async fn connect_with(url: &str, start: pb::Start, opts: &ConnectOptions) -> Result<(SessionClient, pb::Started), ClientError> {
         let connect_err = |message: String| ClientError::Connect { url: url.to_string(), message };
-        let endpoint = tonic::transport::Endpoint::from_shared(url.to_string())
+        let mut endpoint = tonic::transport::Endpoint::from_shared(url.to_string())
             .map_err(|e| connect_err(format!("invalid URL ({})", error_chain(&e))))?
             .connect_timeout(Duration::from_secs(10))
             .tcp_nodelay(true);
+        let https = url.trim_start().to_ascii_lowercase().starts_with("https://");
+        if https {
+            let tls = edgepoint_proto::net::client_tls(opts.tls_ca.as_deref(), opts.tls_domain.as_deref()).map_err(connect_err)?;
+            endpoint = endpoint.tls_config(tls).map_err(|e| connect_err(format!("TLS: {}", error_chain(&e))))?;
+        } else if opts.tls_ca.is_some() || opts.tls_domain.is_some() {
+            return Err(connect_err("TLS options (--tls-ca, --tls-domain) need an https:// server URL".into()));
+        }
+        let auth = match &opts.token {
+            Some(t) => {
+                edgepoint_proto::auth::check_token(t).map_err(|e| connect_err(format!("bad token: {e}")))?;
+                let loopback = endpoint.uri().host().is_some_and(|h| {
+                    let h = h.trim_start_matches('[').trim_end_matches(']');
+                    h == "localhost" || h.parse().is_ok_and(edgepoint_proto::net::is_loopback)
+                });
+                if !https && !loopback {
+                    tracing::warn!(%url, "sending the token without TLS: anyone on the path can read it (use an https:// URL)");
+                }
+                let value = edgepoint_proto::auth::bearer(t)
+                    .parse::<tonic::metadata::MetadataValue<tonic::metadata::Ascii>>()
+                    .map_err(|_| connect_err("the token is not a valid header value".into()))?;
+                Some(value)
+            }
+            None => None,
+        };
         let channel = endpoint.connect().await.map_err(|e| connect_err(error_chain(&e)))?;
         let mut client = RendererClient::new(channel)
             .max_decoding_message_size(MAX_MESSAGE_BYTES)
@@ -108,7 +148,11 @@ impl SessionClient {
         let (tx, rx) = mpsc::unbounded_channel();
         let sender = SessionSender { tx };
         sender.send(viewer_msg::Msg::Start(start))?;
-        let response = client.session(UnboundedReceiverStream::new(rx)).await.map_err(ClientError::from_status)?;
+        let mut request = tonic::Request::new(UnboundedReceiverStream::new(rx));
+        if let Some(v) = auth {
+            request.metadata_mut().insert(edgepoint_proto::auth::AUTHORIZATION, v);
+        }
+        let response = client.session(request).await.map_err(ClientError::from_status)?;
         let mut inbound = response.into_inner();
         let started = match inbound.message().await {
             Ok(Some(pb::ServerMsg { msg: Some(server_msg::Msg::Started(s)) })) => s,

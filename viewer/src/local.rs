@@ -2,7 +2,9 @@
 //! them, started as children of this process (DESIGN.md, "Processes and data flow").
 //!
 //! Every child binds port 0 and reports its address with one `listening <addr>` line on
-//! stdout (the launcher contract of COMMON.md). The children die with the cluster: `Drop`
+//! stdout (the launcher contract of COMMON.md), preceded by `metrics <addr>` when it serves
+//! metrics. With [`LocalOptions::workers_file`] the server discovers the workers from a file
+//! the cluster rewrites, so workers can be added while sessions run ([`LocalCluster::add_worker`]). The children die with the cluster: `Drop`
 //! kills and reaps them; on Linux they also carry `PR_SET_PDEATHSIG(SIGKILL)` so a hard kill
 //! of this process takes them along; and they run in their own process group so a terminal
 //! Ctrl-C reaches only the viewer, which then shuts them down itself instead of racing them.
@@ -48,6 +50,11 @@ pub struct LocalOptions {
     pub log_file: Option<PathBuf>,
     /// How long a child may take to print its `listening` line.
     pub startup_timeout: Duration,
+    /// Give every child `--metrics-listen 127.0.0.1:0` (see [`LocalCluster::server_metrics_addr`]).
+    pub metrics: bool,
+    /// Point the server at a workers file that the cluster keeps up to date (re-read every
+    /// 200 ms) instead of `--worker` flags, so [`LocalCluster::add_worker`] works.
+    pub workers_file: bool,
 }
 
 impl Default for LocalOptions {
@@ -61,6 +68,8 @@ impl Default for LocalOptions {
             log_level: None,
             log_file: None,
             startup_timeout: Duration::from_secs(60),
+            metrics: false,
+            workers_file: false,
         }
     }
 }
@@ -76,7 +85,12 @@ pub struct LocalCluster {
     server_addr: SocketAddr,
     spawner: Spawner,
     log_sink: LogSink,
+    /// The workers file and its directory (removed on drop), with `workers_file`.
+    workers_file: Option<(PathBuf, PathBuf)>,
 }
+
+/// Interval at which a local server re-reads its workers file.
+pub const WORKERS_FILE_INTERVAL_MS: u64 = 200;
 
 struct WorkerSlot {
     addr: SocketAddr,
@@ -104,6 +118,7 @@ impl LocalCluster {
             server_addr: SocketAddr::from(([127, 0, 0, 1], 0)),
             spawner,
             log_sink,
+            workers_file: None,
         };
         // Workers start concurrently (each loads nothing until asked, but process start-up
         // and their runtimes still take a moment); we then wait for each in turn.
@@ -130,9 +145,25 @@ impl LocalCluster {
             cluster.workers.push(WorkerSlot { addr, proc: Some(proc) });
         }
         let mut args = vec!["--listen".to_string(), "127.0.0.1:0".to_string()];
-        for w in &cluster.workers {
-            args.push("--worker".into());
-            args.push(format!("http://{}", w.addr));
+        if cluster.opts.workers_file {
+            let dir = std::env::temp_dir().join(format!("edgepoint-cluster-{}-{}", std::process::id(), unique()));
+            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+            let file = dir.join("workers.txt");
+            cluster.workers_file = Some((file.clone(), dir));
+            cluster.write_workers_file()?;
+            args.push("--workers-file".into());
+            args.push(file.display().to_string());
+            args.push("--discovery-interval-ms".into());
+            args.push(WORKERS_FILE_INTERVAL_MS.to_string());
+        } else {
+            for w in &cluster.workers {
+                args.push("--worker".into());
+                args.push(format!("http://{}", w.addr));
+            }
+        }
+        if cluster.opts.metrics {
+            args.push("--metrics-listen".into());
+            args.push("127.0.0.1:0".into());
         }
         args.extend(cluster.opts.server_args.iter().cloned());
         let p = cluster.spawn_child(SERVER_BIN, &cluster.server_bin.clone(), &args)?;
@@ -171,6 +202,69 @@ impl LocalCluster {
     /// Process id of the server.
     pub fn server_pid(&self) -> Option<u32> {
         self.server.as_ref().map(|p| p.child.id())
+    }
+
+    /// Where the server serves metrics (with [`LocalOptions::metrics`]).
+    pub fn server_metrics_addr(&self) -> Option<SocketAddr> {
+        self.server.as_ref().and_then(|p| p.metrics)
+    }
+
+    /// Where worker `i` serves metrics (with [`LocalOptions::metrics`]; `None` once killed).
+    pub fn worker_metrics_addr(&self, i: usize) -> Option<SocketAddr> {
+        self.workers.get(i)?.proc.as_ref().and_then(|p| p.metrics)
+    }
+
+    /// The workers file the server reads (with [`LocalOptions::workers_file`]).
+    pub fn workers_file(&self) -> Option<&Path> {
+        self.workers_file.as_ref().map(|(f, _)| f.as_path())
+    }
+
+    /// Starts one more worker and, with [`LocalOptions::workers_file`], adds it to the
+    /// server's pool by rewriting the file. Returns its index.
+    pub fn add_worker(&mut self) -> Result<usize> {
+        if self.workers_file.is_none() {
+            bail!("add_worker needs LocalOptions::workers_file: the server was given a fixed --worker list");
+        }
+        let i = self.workers.len();
+        let args = self.worker_args("127.0.0.1:0");
+        let label = format!("{WORKER_BIN} #{i}");
+        let p = self.spawn_child(&label, &self.worker_bin.clone(), &args)?;
+        let (proc, addr) = self.wait_listening(p)?;
+        tracing::info!(worker = i, %addr, pid = proc.child.id(), "local worker added");
+        self.workers.push(WorkerSlot { addr, proc: Some(proc) });
+        self.write_workers_file()?;
+        Ok(i)
+    }
+
+    /// Writes every worker slot's address to the workers file, atomically (write + rename),
+    /// so the server never reads half a file.
+    fn write_workers_file(&self) -> Result<()> {
+        let Some((file, dir)) = &self.workers_file else { return Ok(()) };
+        let tmp = dir.join(format!("workers.txt.{}", unique()));
+        let text: String = self.workers.iter().map(|w| format!("http://{}\n", w.addr)).collect();
+        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, file).with_context(|| format!("replacing {}", file.display()))?;
+        Ok(())
+    }
+
+    /// Stops worker `i` with SIGSTOP: its process and connections stay, it answers nothing
+    /// (a wedged machine, for failure tests). [`Self::continue_worker`] resumes it.
+    pub fn stop_worker(&mut self, i: usize) -> Result<()> {
+        self.signal_worker(i, Signal::Stop)
+    }
+
+    /// Resumes a worker stopped by [`Self::stop_worker`] (SIGCONT).
+    pub fn continue_worker(&mut self, i: usize) -> Result<()> {
+        self.signal_worker(i, Signal::Continue)
+    }
+
+    fn signal_worker(&mut self, i: usize, sig: Signal) -> Result<()> {
+        let n = self.workers.len();
+        let slot = self.workers.get(i).ok_or_else(|| anyhow!("no worker {i} (the cluster has {n})"))?;
+        let pid = slot.proc.as_ref().map(|p| p.child.id()).ok_or_else(|| anyhow!("worker {i} is not running"))?;
+        send_signal(pid, sig).with_context(|| format!("signalling worker {i} (pid {pid})"))?;
+        tracing::info!(worker = i, pid, ?sig, "local worker signalled");
+        Ok(())
     }
 
     /// Whether worker `i`'s process is still running.
@@ -226,6 +320,10 @@ impl LocalCluster {
 
     fn worker_args(&self, listen: &str) -> Vec<String> {
         let mut args = vec!["--listen".to_string(), listen.to_string()];
+        if self.opts.metrics {
+            args.push("--metrics-listen".into());
+            args.push("127.0.0.1:0".into());
+        }
         if let Some(t) = self.opts.worker_threads {
             args.push("--threads".into());
             args.push(t.to_string());
@@ -272,6 +370,10 @@ impl LocalCluster {
                 for line in BufReader::new(stdout).lines() {
                     let Ok(line) = line else { break };
                     if !reported {
+                        if let Some(rest) = line.trim().strip_prefix("metrics ") {
+                            let _ = tx.send(StdoutEvent::Metrics(rest.trim().to_string()));
+                            continue;
+                        }
                         if let Some(rest) = line.trim().strip_prefix("listening ") {
                             reported = true;
                             let _ = tx.send(StdoutEvent::Listening(rest.trim().to_string()));
@@ -296,13 +398,20 @@ impl LocalCluster {
 
     fn wait_listening(&self, p: PendingChild) -> Result<(ChildProc, SocketAddr)> {
         let PendingChild { label, bin, child, tail, stderr_thread, stdout_events } = p;
-        let mut proc = ChildProc { child, tail };
+        let mut proc = ChildProc { child, tail, metrics: None };
         let timeout = self.opts.startup_timeout;
-        let outcome = match stdout_events.recv_timeout(timeout) {
+        let deadline = Instant::now() + timeout;
+        let mut event = stdout_events.recv_timeout(timeout);
+        while let Ok(StdoutEvent::Metrics(m)) = &event {
+            proc.metrics = m.parse().ok();
+            event = stdout_events.recv_timeout(deadline.saturating_duration_since(Instant::now()));
+        }
+        let outcome = match event {
             Ok(StdoutEvent::Listening(addr)) => match addr.parse::<SocketAddr>() {
                 Ok(a) => return Ok((proc, a)),
                 Err(e) => format!("printed `listening {addr}`, which is not a socket address ({e})"),
             },
+            Ok(StdoutEvent::Metrics(_)) => unreachable!("metrics lines are consumed above"),
             Ok(StdoutEvent::Closed) | Err(mpsc::RecvTimeoutError::Disconnected) => {
                 // Give the process a moment to exit and its stderr thread to drain.
                 let deadline = Instant::now() + Duration::from_secs(2);
@@ -351,7 +460,42 @@ impl Drop for LocalCluster {
                 p.kill_and_reap();
             }
         }
+        if let Some((_, dir)) = &self.workers_file {
+            let _ = std::fs::remove_dir_all(dir);
+        }
     }
+}
+
+/// A process-unique number for temporary names.
+fn unique() -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
+/// Signals for failure tests.
+#[derive(Debug, Clone, Copy)]
+enum Signal {
+    Stop,
+    Continue,
+}
+
+#[cfg(unix)]
+fn send_signal(pid: u32, sig: Signal) -> std::io::Result<()> {
+    let s = match sig {
+        Signal::Stop => libc::SIGSTOP,
+        Signal::Continue => libc::SIGCONT,
+    };
+    // SAFETY: kill has no memory preconditions; the pid is our own child's.
+    if unsafe { libc::kill(pid as libc::pid_t, s) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+#[cfg(not(unix))]
+fn send_signal(_pid: u32, _sig: Signal) -> std::io::Result<()> {
+    Err(std::io::Error::other("stopping processes needs Unix signals"))
 }
 
 impl std::fmt::Debug for LocalCluster {
@@ -364,6 +508,7 @@ impl std::fmt::Debug for LocalCluster {
 }
 
 enum StdoutEvent {
+    Metrics(String),
     Listening(String),
     Closed,
 }
@@ -380,6 +525,8 @@ struct PendingChild {
 struct ChildProc {
     child: Child,
     tail: Arc<Mutex<VecDeque<String>>>,
+    /// Its metrics endpoint, when it printed one.
+    metrics: Option<SocketAddr>,
 }
 
 impl ChildProc {

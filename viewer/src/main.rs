@@ -10,7 +10,7 @@ use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use edgepoint_viewer::script::{Script, ScriptStep};
 use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
-use edgepoint_viewer::{scene_source_from_arg, Event, SessionClient};
+use edgepoint_viewer::{scene_source_from_arg, ConnectOptions, Event, SessionClient};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -37,6 +37,23 @@ struct Args {
     /// of starting a local cluster.
     #[arg(long, value_name = "URL", conflicts_with = "local")]
     server: Option<String>,
+
+    /// Bearer token for a server started with --token-file (also read from EDGEPOINT_TOKEN;
+    /// prefer --token-file: a command line is visible to other users of the machine).
+    #[arg(long, value_name = "TOKEN", env = "EDGEPOINT_TOKEN", hide_env_values = true, conflicts_with = "token_file")]
+    token: Option<String>,
+
+    /// File holding the bearer token (its first token line; `#` comments skipped).
+    #[arg(long, value_name = "FILE", requires = "server")]
+    token_file: Option<PathBuf>,
+
+    /// PEM CA certificate to verify an https:// server with (default: the web PKI roots).
+    #[arg(long, value_name = "FILE", requires = "server")]
+    tls_ca: Option<PathBuf>,
+
+    /// Name the server's certificate must carry (default: the host in --server).
+    #[arg(long, value_name = "NAME", requires = "server")]
+    tls_domain: Option<String>,
 
     /// Start a local cluster (shader workers + one server, as child processes) and view it.
     /// This is the default when --server is not given.
@@ -272,11 +289,23 @@ fn run(args: Args) -> Result<()> {
         settings,
         camera: None,
     };
+    let token = match (&args.token, &args.token_file) {
+        (Some(t), _) => Some(t.trim().to_string()),
+        (None, Some(p)) => {
+            let tokens = edgepoint_proto::auth::read_token_file(p).map_err(anyhow::Error::msg)?;
+            tokens.into_iter().next()
+        }
+        (None, None) => None,
+    };
+    if token.is_some() && args.server.is_none() {
+        tracing::warn!("the token is not used: the local cluster takes none (give --server URL to use it)");
+    }
+    let connect = ConnectOptions { token, tls_ca: args.tls_ca.clone(), tls_domain: args.tls_domain.clone() };
     tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
     let connected = rt.block_on(async {
         let mut stop = stop_rx.clone();
         tokio::select! {
-            r = SessionClient::connect(&url, start) => Some(r),
+            r = SessionClient::connect_with(&url, start, &connect) => Some(r),
             _ = stop.wait_for(|s| *s) => None,
         }
     });

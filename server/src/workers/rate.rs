@@ -7,6 +7,11 @@
 //! worker hoards batches another worker could shade sooner. [`InFlightLimit`] covers the
 //! round trip (measured on batches that were alone in flight, so the worker's own queueing
 //! does not inflate it) plus two batches of shading work.
+//!
+//! [`BatchSizer`] sets how many requests one batch to a worker holds: enough work for
+//! about a target time at that worker's measured rate. A slow worker (an expensive shader,
+//! a small machine) gets small batches, so no request waits long behind it; a fast one gets
+//! whole batches as the session built them.
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -97,6 +102,50 @@ impl InFlightLimit {
     }
 }
 
+/// Requests per batch for one worker, from its measured throughput.
+///
+/// The rate is samples per *busy* second (time with at least one batch in flight), so a
+/// worker that idles for lack of work is not mistaken for a slow one. Samples and busy time
+/// are decayed separately and divided, which weights each answer by the time it covered.
+#[derive(Debug, Clone)]
+pub struct BatchSizer {
+    target: Duration,
+    min: usize,
+    max: usize,
+    samples: f64,
+    busy_s: f64,
+}
+
+/// Decay per observation of [`BatchSizer`]'s sums (about the last 20 answers count).
+const SIZER_DECAY: f64 = 0.95;
+
+impl BatchSizer {
+    /// Batches of about `target` of work, between `min` and `max` requests.
+    pub fn new(target: Duration, min: usize, max: usize) -> Self {
+        let min = min.max(1);
+        BatchSizer { target, min, max: max.max(min), samples: 0.0, busy_s: 0.0 }
+    }
+
+    /// `samples` were answered after `busy` of busy time since the previous answer.
+    pub fn observe(&mut self, samples: u64, busy: Duration) {
+        self.samples = SIZER_DECAY * self.samples + samples as f64;
+        self.busy_s = SIZER_DECAY * self.busy_s + busy.as_secs_f64();
+    }
+
+    /// Measured samples per busy second, once something was measured.
+    pub fn rate(&self) -> Option<f64> {
+        (self.busy_s > 1e-6 && self.samples > 0.0).then(|| self.samples / self.busy_s)
+    }
+
+    /// Largest batch to send this worker; `max` until its rate is known.
+    pub fn size(&self) -> usize {
+        match self.rate() {
+            Some(r) => ((r * self.target.as_secs_f64()).round() as usize).clamp(self.min, self.max),
+            None => self.max,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -132,5 +181,29 @@ mod tests {
         let mut lan = InFlightLimit::new(4, 2, 16);
         lan.observe(Duration::from_millis(500), 0.0, true);
         assert_eq!(lan.get(), 16, "clamped to the maximum");
+    }
+
+    #[test]
+    fn batch_size_follows_the_busy_rate() {
+        let mut s = BatchSizer::new(Duration::from_millis(20), 16, 4096);
+        assert_eq!(s.size(), 4096, "unmeasured: no splitting");
+        // 1000 samples per busy second: 20 ms of work is 20 requests.
+        for _ in 0..50 {
+            s.observe(100, Duration::from_millis(100));
+        }
+        assert!((s.rate().unwrap() - 1000.0).abs() < 1e-6);
+        assert_eq!(s.size(), 20);
+        // The worker gets 100x faster: the size follows within a few dozen answers.
+        for _ in 0..200 {
+            s.observe(1000, Duration::from_millis(10));
+        }
+        assert!((1990..=2000).contains(&s.size()), "{}", s.size());
+        // Clamped at both ends.
+        let mut slow = BatchSizer::new(Duration::from_millis(20), 16, 4096);
+        slow.observe(1, Duration::from_secs(10));
+        assert_eq!(slow.size(), 16);
+        let mut fast = BatchSizer::new(Duration::from_millis(20), 16, 256);
+        fast.observe(1_000_000, Duration::from_millis(1));
+        assert_eq!(fast.size(), 256);
     }
 }
