@@ -1,6 +1,9 @@
 //! edgepoint renderer library. Folders follow the per-frame pipeline (DESIGN.md):
 //!
 //! - [`edges`] — paper 000 §6: discontinuity edges (brute-force finder; the oracle).
+//! - [`epi`] — paper 000 §4–§5: the edge-and-point image (edge rasterization, pixel
+//!   classification, reachability, edge-respecting interpolation, anti-aliasing, complex
+//!   filter) (no networking).
 //! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
 //!   occlusion culling, gap-filling interpolation (no networking).
 //! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
@@ -15,6 +18,7 @@
 
 pub mod edges;
 pub mod encode;
+pub mod epi;
 pub mod image_metrics;
 pub mod reference;
 pub mod render_cache;
