@@ -90,7 +90,7 @@ pub struct ReferenceArgs {
     pub json: bool,
 }
 
-fn parse_param(s: &str) -> Result<(String, f64), String> {
+pub fn parse_param(s: &str) -> Result<(String, f64), String> {
     let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
     let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
     Ok((k.trim().to_string(), v))
@@ -146,14 +146,7 @@ async fn references(
     Ok(References { converged, converged_cached, one_spp })
 }
 
-fn write_png(path: &std::path::Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
-    let mut bytes = Vec::with_capacity(linear.len() * 3);
-    for c in linear {
-        bytes.extend_from_slice(&edgepoint_server::image_metrics::linear_to_srgb8(*c));
-    }
-    image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgb8)
-        .with_context(|| format!("writing {}", path.display()))
-}
+use crate::inprocess::write_png;
 
 pub fn run(args: FrameArgs) -> Result<()> {
     let a = &args.scene;

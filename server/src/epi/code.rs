@@ -138,19 +138,14 @@ impl Cell {
         }
     }
 
-    /// Region index of a position `(u, v)` in `[0, 1)²` of the cell: `rx + R * ry`.
+    /// Region index of a position `(u, v)` in `[0, 1)²` of the cell: `rx + R * ry` (values
+    /// outside are clamped, NaN counts as 0). `R` is a power of two: `1 + t` lies in [1, 2),
+    /// where the top mantissa bits of an `f32` are `floor(t * R)` — no float-to-int
+    /// conversion, which costs more than the rest of a pixel's classification.
     #[inline]
     pub fn region_of(self, u: f32, v: f32) -> u32 {
-        let r = self.regions as f32;
-        let q = |t: f32| -> u32 {
-            let i = t * r;
-            // NaN and negatives go to 0, 1.0 and above to the last region.
-            if i >= 0.0 {
-                (i as u32).min(self.regions - 1)
-            } else {
-                0
-            }
-        };
+        let bits = self.regions.trailing_zeros();
+        let q = |t: f32| ((t.max(0.0).min(0.999_999) + 1.0).to_bits() >> (23 - bits)) & (self.regions - 1);
         q(u) + self.regions * q(v)
     }
 
@@ -197,7 +192,7 @@ impl EpiPixel {
         self.0 & 0x3FF
     }
 
-    /// Region (0..16) of the pixel's sample; meaningless without a sample.
+    /// Region (0..16) of the pixel's sample; 0 without a sample.
     #[inline]
     pub fn region(self) -> u32 {
         u32::from((self.0 >> Self::REGION_SHIFT) & 0xF)
@@ -283,6 +278,13 @@ mod tests {
         assert_eq!(PIXEL.region_of(0.99, 0.3), 3 + 4);
         assert_eq!(PIXEL.region_of(0.26, 0.999), 1 + 12);
         assert_eq!(PIXEL.region_of(f32::NAN, 2.0), 12);
+        assert_eq!(PIXEL.region_of(-0.5, 0.999_999_9), 12);
+        // Against floor(t * 4) everywhere on a fine grid.
+        for i in 0..4096 {
+            let t = i as f32 / 4096.0;
+            assert_eq!(PIXEL.region_of(t, 0.0), (t * 4.0) as u32, "{t}");
+            assert_eq!(SUBPIXEL.region_of(0.0, t), 2 * (t * 2.0) as u32, "{t}");
+        }
         let p = EpiPixel::new(PIXEL.encode(2, 29), 13, true, true);
         assert_eq!((p.code(), p.region(), p.usable(), p.primary_b()), (PIXEL.encode(2, 29), 13, true, true));
         assert!(p.is_simple() && !p.is_empty() && !p.is_complex());

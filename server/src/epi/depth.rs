@@ -9,7 +9,7 @@
 //! in front of the background is visible. The offset is relative to the depth (so it is
 //! scale-free) and grows as the window's points thin out, because a sparse window is less
 //! likely to hold a point from the far side of a silhouette.
-use crate::render_cache::PointImage;
+use crate::render_cache::{PointImage, NO_POINT};
 use rayon::prelude::*;
 
 /// Relative slack added to every window maximum: surface points within two pixels of an
@@ -47,45 +47,10 @@ impl ConservativeDepth {
             return;
         }
         debug_assert_eq!(points.depth.len(), w * h);
-        let present = |i: usize| points.point[i] != crate::render_cache::NO_POINT;
-        self.depth.par_chunks_mut(w).enumerate().for_each_init(
-            || (vec![0f32; w], vec![0u8; w]),
-            |(colmax, colcount), (y, out)| {
-                // Column maxima and counts over rows y-2 ..= y+1.
-                let (y0, y1) = (y.saturating_sub(2), (y + 1).min(h - 1));
-                colmax.fill(f32::NEG_INFINITY);
-                colcount.fill(0);
-                for yy in y0..=y1 {
-                    let row = yy * w;
-                    for x in 0..w {
-                        if present(row + x) {
-                            let d = points.depth[row + x];
-                            // NaN never gets here (depths are finite or +inf).
-                            if d > colmax[x] {
-                                colmax[x] = d;
-                            }
-                            colcount[x] += 1;
-                        }
-                    }
-                }
-                let rows = (y1 - y0 + 1) as f32;
-                for (x, o) in out.iter_mut().enumerate() {
-                    let (x0, x1) = (x.saturating_sub(2), (x + 1).min(w - 1));
-                    let (mut m, mut n) = (f32::NEG_INFINITY, 0u32);
-                    for xx in x0..=x1 {
-                        m = m.max(colmax[xx]);
-                        n += u32::from(colcount[xx]);
-                    }
-                    *o = if n == 0 {
-                        f32::INFINITY
-                    } else {
-                        let window = rows * (x1 - x0 + 1) as f32;
-                        let empty = 1.0 - n as f32 / window;
-                        m * (1.0 + DEPTH_SLACK + SPARSE_SLACK * empty)
-                    };
-                }
-            },
-        );
+        self.depth
+            .par_chunks_mut(BAND_ROWS * w)
+            .enumerate()
+            .for_each_init(|| (Vec::new(), Vec::new()), |(hmax, hcount), (b, out)| depth_band(points, w, h, b * BAND_ROWS, hmax, hcount, out));
     }
 
     /// Conservative depth at vertex (x, y), clamped into the buffer.
@@ -94,6 +59,76 @@ impl ConservativeDepth {
         let x = x.clamp(0, self.width as i64 - 1) as usize;
         let y = y.clamp(0, self.height as i64 - 1) as usize;
         self.depth[y * self.width + x]
+    }
+}
+
+/// Rows per parallel task of [`ConservativeDepth::compute`].
+const BAND_ROWS: usize = 16;
+
+/// Maximum of two depths that are never NaN (compiles to one `maxps` lane).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Rows `y0 ..` of the buffer (as many as `out` holds): the window maxima and counts along
+/// each point row first (rows `y0 - 2 ..= y_last + 1`, into `hmax` / `hcount`), then across
+/// four of those rows. Written as straight loops over slices so that they vectorise.
+#[inline(never)]
+fn depth_band(points: &PointImage, w: usize, h: usize, y0: usize, hmax: &mut Vec<f32>, hcount: &mut Vec<f32>, out: &mut [f32]) {
+    let rows_out = out.len() / w;
+    let (ya, yb) = (y0.saturating_sub(2), (y0 + rows_out).min(h - 1));
+    let rows = yb - ya + 1;
+    // One spare row holds the per-pixel depths and counts of the row being filtered.
+    hmax.resize((rows + 1) * w, 0.0);
+    hcount.resize((rows + 1) * w, 0.0);
+    let (hm_all, d) = hmax.split_at_mut(rows * w);
+    let (hc_all, c) = hcount.split_at_mut(rows * w);
+    for r in 0..rows {
+        let y = ya + r;
+        let (pt, dp) = (&points.point[y * w..(y + 1) * w], &points.depth[y * w..(y + 1) * w]);
+        // A pixel without a point adds nothing (depths are finite or +inf, never NaN).
+        for ((dx, cx), (&p, &z)) in d.iter_mut().zip(c.iter_mut()).zip(pt.iter().zip(dp)) {
+            let present = p != NO_POINT;
+            *dx = if present { z } else { f32::NEG_INFINITY };
+            *cx = if present { 1.0 } else { 0.0 };
+        }
+        let (hm, hc) = (&mut hm_all[r * w..(r + 1) * w], &mut hc_all[r * w..(r + 1) * w]);
+        // Window [x - 2, x + 1]: interior in one pass, the clipped ends separately.
+        if w >= 4 {
+            for x in 2..w - 1 {
+                hm[x] = max(max(d[x - 2], d[x - 1]), max(d[x], d[x + 1]));
+                hc[x] = (c[x - 2] + c[x - 1]) + (c[x] + c[x + 1]);
+            }
+        }
+        for x in (0..2.min(w)).chain((w.max(3) - 1).max(2)..w) {
+            let (lo, hi) = (x.saturating_sub(2), (x + 1).min(w - 1));
+            hm[x] = d[lo..=hi].iter().fold(f32::NEG_INFINITY, |a, &b| max(a, b));
+            hc[x] = c[lo..=hi].iter().sum();
+        }
+    }
+    for (ry, o) in out.chunks_mut(w).enumerate() {
+        let y = y0 + ry;
+        let (lo, hi) = (y.saturating_sub(2) - ya, (y + 1).min(h - 1) - ya);
+        let vrows = (hi - lo + 1) as f32;
+        // Running maxima and counts over the window's rows, into `d` and `c`.
+        d.copy_from_slice(&hm_all[lo * w..(lo + 1) * w]);
+        c.copy_from_slice(&hc_all[lo * w..(lo + 1) * w]);
+        for r in lo + 1..=hi {
+            for ((m, n), (&a, &b)) in d.iter_mut().zip(c.iter_mut()).zip(hm_all[r * w..(r + 1) * w].iter().zip(&hc_all[r * w..(r + 1) * w])) {
+                *m = max(*m, a);
+                *n += b;
+            }
+        }
+        for (x, ((o, &m), &n)) in o.iter_mut().zip(d.iter()).zip(c.iter()).enumerate() {
+            let cols = if x >= 2 && x + 1 < w { 4.0 } else { ((x + 1).min(w - 1) - x.saturating_sub(2) + 1) as f32 };
+            let empty = 1.0 - n / (vrows * cols);
+            *o = if n == 0.0 { f32::INFINITY } else { m * (1.0 + DEPTH_SLACK + SPARSE_SLACK * empty) };
+        }
     }
 }
 

@@ -40,6 +40,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tables::{tables, AMBIGUOUS, SIDE_B};
 
+
 /// Stage names (paper Table 2 columns).
 pub const STAGE_EDGES: &str = "edges";
 pub const STAGE_RASTERIZE: &str = "rasterize";
@@ -196,63 +197,12 @@ impl Epi {
         if w == 0 {
             return EpiCounts::default();
         }
-        let t = tables();
         let bounds = &self.bounds;
         self.pixels
             .par_chunks_mut(w)
             .zip(self.flags.planes.par_chunks_mut(Flags::PLANES * words))
             .enumerate()
-            .map(|(y, (px, fl))| {
-                let mut c = EpiCounts::default();
-                for j in 0..words {
-                    let mut planes = [0u64; Flags::PLANES];
-                    for i in 0..(w - 64 * j).min(64) {
-                        let x = 64 * j + i;
-                        let code = PIXEL.classify(bounds.mask(x, y));
-                        let idx = y * w + x;
-                        let has = points.point[idx] != NO_POINT;
-                        let (region, usable, primary_b) = if has {
-                            let [u, v] = points.subpixel[idx];
-                            let r = PIXEL.region_of(u, v);
-                            let side = t.pixel.side(code, r);
-                            let usable = side != AMBIGUOUS;
-                            (r, usable, if usable { side == SIDE_B } else { t.pixel.area_a(code) < 0.5 })
-                        } else {
-                            (0, false, t.pixel.area_a(code) < 0.5)
-                        };
-                        let p = EpiPixel::new(code, region, usable, primary_b);
-                        px[x] = p;
-                        let bit = 1u64 << i;
-                        if has {
-                            planes[Flags::HAS] |= bit;
-                        }
-                        if usable {
-                            planes[Flags::USABLE] |= bit;
-                        }
-                        if p.is_simple() {
-                            planes[Flags::SIMPLE] |= bit;
-                            c.simple += 1;
-                            if has {
-                                if usable {
-                                    c.usable_samples += 1;
-                                } else {
-                                    c.ambiguous_samples += 1;
-                                }
-                            }
-                        } else if p.is_complex() {
-                            planes[Flags::COMPLEX] |= bit;
-                            c.complex += 1;
-                        } else {
-                            c.empty += 1;
-                            c.usable_samples += u32::from(has);
-                        }
-                    }
-                    for (p, v) in planes.into_iter().enumerate() {
-                        fl[p * words + j] = v;
-                    }
-                }
-                c
-            })
+            .map(|(y, (px, fl))| classify_row(bounds, points, y, px, fl))
             .reduce(EpiCounts::default, |a, b| EpiCounts {
                 empty: a.empty + b.empty,
                 simple: a.simple + b.simple,
@@ -283,7 +233,7 @@ impl Epi {
         assert!(image.len() == n && weights.len() == n && points.point.len() == n, "EPI {}x{}: buffers of another size", self.width, self.height);
         times.time(STAGE_REACH, || {
             self.neighbours.compute(&self.pixels, &self.flags);
-            self.reach.compute(&self.neighbours);
+            self.reach.compute(&self.neighbours, &self.flags);
         });
         let kernel = Kernel::gaussian(options.sigma);
         let interp = times.time(STAGE_INTERPOLATE, || {
@@ -352,6 +302,90 @@ impl Epi {
             ("rasterizer segments and bins", self.raster.bytes()),
         ]
     }
+}
+
+/// Classifies and encodes row `y`: EPI pixels and flag planes.
+#[inline(never)]
+fn classify_row(bounds: &raster::Boundaries, points: &PointImage, y: usize, px: &mut [EpiPixel], fl: &mut [u64]) -> EpiCounts {
+    let t = tables();
+    let w = px.len();
+    let words = w.div_ceil(64);
+    let mut c = EpiCounts::default();
+    let (row, below) = (&bounds.sides[y * (w + 1)..(y + 1) * (w + 1)], &bounds.sides[(y + 1) * (w + 1)..(y + 2) * (w + 1)]);
+    let (pt, sub) = (&points.point[y * w..(y + 1) * w], &points.subpixel[y * w..(y + 1) * w]);
+    let region = |x: usize| {
+        let [u, v] = sub[x];
+        PIXEL.region_of(u, v)
+    };
+    for j in 0..words {
+        let x0 = 64 * j;
+        let n = (w - x0).min(64);
+        let mut planes = [0u64; Flags::PLANES];
+        let mut has_bits = 0u64;
+        for i in 0..n {
+            has_bits |= u64::from(pt[x0 + i] != NO_POINT) << i;
+        }
+        planes[Flags::HAS] = has_bits;
+        // No crossing on any side of the word's pixels: all empty, every sample usable.
+        let quiet = row[x0..=x0 + n].iter().fold(0, |a, &v| a | v) == 0 && below[x0..x0 + n].iter().fold(0, |a, &v| a | (v >> 8)) == 0;
+        if quiet {
+            for i in 0..n {
+                let has = (has_bits >> i) & 1 == 1;
+                px[x0 + i] = EpiPixel::new(code::EMPTY, if has { region(x0 + i) } else { 0 }, has, false);
+            }
+            planes[Flags::USABLE] = has_bits;
+            c.empty += n as u32;
+            c.usable_samples += has_bits.count_ones();
+        } else {
+            for i in 0..n {
+                let x = x0 + i;
+                let has = (has_bits >> i) & 1 == 1;
+                let m = code::pixel_mask((row[x] >> 8) as u8, row[x + 1] as u8, (below[x] >> 8) as u8, row[x] as u8);
+                let bit = 1u64 << i;
+                if m == 0 {
+                    px[x] = EpiPixel::new(code::EMPTY, if has { region(x) } else { 0 }, has, false);
+                    if has {
+                        planes[Flags::USABLE] |= bit;
+                        c.usable_samples += 1;
+                    }
+                    c.empty += 1;
+                    continue;
+                }
+                let code = PIXEL.classify(m);
+                let r = if has { region(x) } else { 0 };
+                let (usable, primary_b) = if has {
+                    let side = t.pixel.side(code, r);
+                    let usable = side != AMBIGUOUS;
+                    (usable, if usable { side == SIDE_B } else { t.pixel.area_a(code) < 0.5 })
+                } else {
+                    (false, t.pixel.area_a(code) < 0.5)
+                };
+                let p = EpiPixel::new(code, r, usable, primary_b);
+                px[x] = p;
+                if usable {
+                    planes[Flags::USABLE] |= bit;
+                }
+                if p.is_simple() {
+                    planes[Flags::SIMPLE] |= bit;
+                    c.simple += 1;
+                    if has {
+                        if usable {
+                            c.usable_samples += 1;
+                        } else {
+                            c.ambiguous_samples += 1;
+                        }
+                    }
+                } else {
+                    planes[Flags::COMPLEX] |= bit;
+                    c.complex += 1;
+                }
+            }
+        }
+        for (p, v) in planes.into_iter().enumerate() {
+            fl[p * words + j] = v;
+        }
+    }
+    c
 }
 
 #[cfg(test)]

@@ -29,6 +29,8 @@ use super::tables::{tables, Tables, DIR_DOWN, DIR_RIGHT};
 use super::Flags;
 use rayon::prelude::*;
 
+pub mod scalar;
+
 /// Number of neighbour-mask planes per row: right PP, PS, SP, SS, then down PP, PS, SP, SS.
 pub const NB_PLANES: usize = 8;
 /// Number of stored reachability planes per row (the offsets after the centre).
@@ -116,41 +118,7 @@ impl Neighbours {
         if w == 0 || h == 0 {
             return;
         }
-        let t = tables();
-        self.planes.par_chunks_mut(NB_PLANES * words).enumerate().for_each(|(y, out)| {
-            let nonempty = |yy: usize, j: usize| flags.row(yy, Flags::SIMPLE)[j] | flags.row(yy, Flags::COMPLEX)[j];
-            for j in 0..words {
-                let valid = if 64 * (j + 1) <= w { !0u64 } else { (1u64 << (w - 64 * j)) - 1 };
-                // Pixels with a right neighbour in the image.
-                let right_valid = if 64 * (j + 1) < w { !0u64 } else { valid >> 1 };
-                let busy = nonempty(y, j) != 0
-                    || (j + 1 < words && nonempty(y, j + 1) & 1 != 0)
-                    || (y + 1 < h && nonempty(y + 1, j) != 0);
-                if !busy {
-                    out[j] = right_valid;
-                    out[4 * words + j] = if y + 1 < h { valid } else { 0 };
-                    for p in [1, 2, 3, 5, 6, 7] {
-                        out[p * words + j] = 0;
-                    }
-                    continue;
-                }
-                let mut acc = [0u64; NB_PLANES];
-                let x0 = 64 * j;
-                for i in 0..(w - x0).min(64) {
-                    let x = x0 + i;
-                    let c = class4(t, pixels[y * w + x]);
-                    let hm = if x + 1 < w { t.neighbour(DIR_RIGHT, c, class4(t, pixels[y * w + x + 1])) } else { 0 };
-                    let vm = if y + 1 < h { t.neighbour(DIR_DOWN, c, class4(t, pixels[(y + 1) * w + x])) } else { 0 };
-                    for b in 0..4 {
-                        acc[b] |= u64::from((hm >> b) & 1) << i;
-                        acc[4 + b] |= u64::from((vm >> b) & 1) << i;
-                    }
-                }
-                for (p, a) in acc.into_iter().enumerate() {
-                    out[p * words + j] = a;
-                }
-            }
-        });
+        self.planes.par_chunks_mut(NB_PLANES * words).enumerate().for_each(|(y, out)| neighbour_row(pixels, flags, w, h, y, out));
     }
 
     /// Plane `p` of row `y` (which must be in the image).
@@ -159,28 +127,52 @@ impl Neighbours {
         let s = (y * NB_PLANES + p) * self.words;
         &self.planes[s..s + self.words]
     }
+}
 
-    /// Mask (4 planes) between each pixel `c + (qx, qy)` and its right neighbour, for the 64
-    /// centres `c` of word `j` of row `y`.
-    #[inline(always)]
-    fn right(&self, y: i64, j: usize, qx: i32, qy: i32) -> M4 {
-        let yy = y + qy as i64;
-        M4(std::array::from_fn(|b| self.plane_bits(yy, b, j, qx)))
-    }
-
-    /// Mask between each pixel `c + (qx, qy)` and its down neighbour.
-    #[inline(always)]
-    fn down(&self, y: i64, j: usize, qx: i32, qy: i32) -> M4 {
-        let yy = y + qy as i64;
-        M4(std::array::from_fn(|b| self.plane_bits(yy, 4 + b, j, qx)))
-    }
-
-    #[inline(always)]
-    fn plane_bits(&self, y: i64, p: usize, j: usize, dx: i32) -> u64 {
-        if y < 0 || y as usize >= self.height {
-            0
-        } else {
-            shifted(self.row(y as usize, p), j, dx)
+/// Row `y` of the neighbour planes.
+#[inline(never)]
+fn neighbour_row(pixels: &[EpiPixel], flags: &Flags, w: usize, h: usize, y: usize, out: &mut [u64]) {
+    let t = tables();
+    let words = w.div_ceil(64);
+    let nonempty = |yy: usize, j: usize| flags.row(yy, Flags::SIMPLE)[j] | flags.row(yy, Flags::COMPLEX)[j];
+    let has_down = y + 1 < h;
+    for j in 0..words {
+        let valid = valid_word(w, j as i64);
+        // Pixels with a right / down neighbour in the image.
+        let right_valid = valid & (valid_word(w, j as i64 + 1) << 63 | valid >> 1);
+        let down_valid = if has_down { valid } else { 0 };
+        // Two empty neighbours meet primary to primary: set in bulk. Only pairs with an edge
+        // in either pixel go through the table.
+        let here = nonempty(y, j);
+        let right = here >> 1 | if j + 1 < words { nonempty(y, j + 1) << 63 } else { 0 };
+        let down = if has_down { nonempty(y + 1, j) } else { 0 };
+        let (h_busy, v_busy) = ((here | right) & right_valid, (here | down) & down_valid);
+        let mut acc = [0u64; NB_PLANES];
+        acc[0] = right_valid & !h_busy;
+        acc[4] = down_valid & !v_busy;
+        let x0 = 64 * j;
+        let mut bits = h_busy;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let x = x0 + i;
+            let m = t.neighbour(DIR_RIGHT, class4(t, pixels[y * w + x]), class4(t, pixels[y * w + x + 1]));
+            for (b, a) in acc[..4].iter_mut().enumerate() {
+                *a |= u64::from((m >> b) & 1) << i;
+            }
+        }
+        let mut bits = v_busy;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let x = x0 + i;
+            let m = t.neighbour(DIR_DOWN, class4(t, pixels[y * w + x]), class4(t, pixels[(y + 1) * w + x]));
+            for (b, a) in acc[4..].iter_mut().enumerate() {
+                *a |= u64::from((m >> b) & 1) << i;
+            }
+        }
+        for (p, a) in acc.into_iter().enumerate() {
+            out[p * words + j] = a;
         }
     }
 }
@@ -212,19 +204,12 @@ impl Reach {
     }
 
     /// Propagates reachability outward from every pixel (see the module doc).
-    pub fn compute(&mut self, nb: &Neighbours) {
+    pub fn compute(&mut self, nb: &Neighbours, flags: &Flags) {
         let words = self.words;
         if words == 0 {
             return;
         }
-        self.planes.par_chunks_mut(REACH_PLANES * words).enumerate().for_each(|(y, out)| {
-            for j in 0..words {
-                let planes = propagate(nb, y as i64, j);
-                for (l, p) in planes.into_iter().enumerate() {
-                    out[l * words + j] = p;
-                }
-            }
-        });
+        self.planes.par_chunks_mut(REACH_PLANES * words).enumerate().for_each(|(y, out)| reach_row(nb, flags, y, out));
     }
 
     /// Stored plane for window index `k` (13..25) of row `y`.
@@ -265,14 +250,108 @@ impl Reach {
     }
 }
 
-/// The 12 primary-to-primary planes (window indices 13..25) of the 64 centres of word `j`
-/// of row `y`: monotone-path propagation with bit-sliced chaining.
+/// Bits of the pixels of word `j` (possibly outside the row) that lie in a row `w` wide.
 #[inline(always)]
-fn propagate(nb: &Neighbours, y: i64, j: usize) -> [u64; REACH_PLANES] {
-    let r = |qx, qy| nb.right(y, j, qx, qy);
-    let d = |qx, qy| nb.down(y, j, qx, qy);
+fn valid_word(w: usize, j: i64) -> u64 {
+    if j < 0 || 64 * j as usize >= w {
+        0
+    } else if 64 * (j as usize + 1) <= w {
+        !0
+    } else {
+        (1u64 << (w - 64 * j as usize)) - 1
+    }
+}
+
+/// Whether no pixel of rows `y ..= y + 2`, words `j - 1 ..= j + 1`, has an edge: then every
+/// pixel of word `j` reaches every pixel of its window that is in the image.
+#[inline(always)]
+fn quiet(flags: &Flags, y: usize, j: usize) -> bool {
+    let (lo, hi) = (j.saturating_sub(1), (j + 1).min(flags.words - 1));
+    (y..(y + 3).min(flags.height)).all(|yy| {
+        let (s, c) = (flags.row(yy, Flags::SIMPLE), flags.row(yy, Flags::COMPLEX));
+        (lo..=hi).all(|jj| s[jj] | c[jj] == 0)
+    })
+}
+
+/// Computes row `y` of the stored planes.
+#[inline(never)]
+fn reach_row(nb: &Neighbours, flags: &Flags, y: usize, out: &mut [u64]) {
+    let (w, h, words) = (nb.width, nb.height, nb.words);
+    for j in 0..words {
+        let planes = if quiet(flags, y, j) {
+            // Window indices 13..25 in order: offsets (dx, dy).
+            std::array::from_fn(|l| {
+                let (dx, dy) = offset(13 + l);
+                if y + dy as usize >= h {
+                    return 0;
+                }
+                let (a, b, c) = (valid_word(w, j as i64 - 1), valid_word(w, j as i64), valid_word(w, j as i64 + 1));
+                // Both the centre and the pixel it reaches in the image.
+                Window::shift([a, b, c], dx) & b
+            })
+        } else {
+            propagate(&Window::load(nb, y, j))
+        };
+        for (l, p) in planes.into_iter().enumerate() {
+            out[l * words + j] = p;
+        }
+    }
+}
+
+/// The neighbour planes of rows `y ..= y + 2` around word `j`: `[row][plane][word j-1, j, j+1]`
+/// (zeros outside the image), so that every neighbour offset is a shift of registers.
+struct Window([[[u64; 3]; NB_PLANES]; 3]);
+
+impl Window {
+    #[inline(always)]
+    fn load(nb: &Neighbours, y: usize, j: usize) -> Window {
+        let mut win = [[[0u64; 3]; NB_PLANES]; 3];
+        for (qy, rows) in win.iter_mut().enumerate() {
+            if y + qy >= nb.height {
+                break;
+            }
+            for (p, words) in rows.iter_mut().enumerate() {
+                let row = nb.row(y + qy, p);
+                *words = [if j > 0 { row[j - 1] } else { 0 }, row[j], if j + 1 < row.len() { row[j + 1] } else { 0 }];
+            }
+        }
+        Window(win)
+    }
+
+    /// Bit `i` of the result is bit `i + dx` of the middle word (from its neighbours past the
+    /// ends); `dx` in -63..=63.
+    #[inline(always)]
+    fn shift([a, b, c]: [u64; 3], dx: i32) -> u64 {
+        if dx == 0 {
+            b
+        } else if dx > 0 {
+            (b >> dx) | (c << (64 - dx))
+        } else {
+            (b << -dx) | (a >> (64 + dx))
+        }
+    }
+
+    /// Masks between each pixel `c + (qx, qy)` and its right neighbour.
+    #[inline(always)]
+    fn right(&self, qx: i32, qy: usize) -> M4 {
+        M4(std::array::from_fn(|b| Self::shift(self.0[qy][b], qx)))
+    }
+
+    /// Masks between each pixel `c + (qx, qy)` and its down neighbour.
+    #[inline(always)]
+    fn down(&self, qx: i32, qy: usize) -> M4 {
+        M4(std::array::from_fn(|b| Self::shift(self.0[qy][4 + b], qx)))
+    }
+}
+
+/// The 12 primary-to-primary planes (window indices 13..25) of the 64 centres of a word:
+/// monotone-path propagation with bit-sliced chaining.
+#[inline(always)]
+fn propagate(win: &Window) -> [u64; REACH_PLANES] {
+    let r = |qx, qy| win.right(qx, qy);
+    let d = |qx, qy| win.down(qx, qy);
     // Moving left from q: the transposed right mask of q's left neighbour.
-    let l = |qx: i32, qy| nb.right(y, j, qx - 1, qy).transpose();
+    let l = |qx: i32, qy| win.right(qx - 1, qy).transpose();
     let m10 = r(0, 0);
     let mm10 = l(0, 0);
     let m20 = m10.chain(r(1, 0));

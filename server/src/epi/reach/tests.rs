@@ -109,10 +109,13 @@ fn reachability_matches_flood_fill_along_monotone_paths_on_random_epis() {
         let c = *epi.counts();
         assert!(c.simple > 10 && c.complex > 3 && c.empty > 10, "{c:?}");
         epi.neighbours.compute(&epi.pixels, &epi.flags);
-        epi.reach.compute(&epi.neighbours);
+        epi.reach.compute(&epi.neighbours, &epi.flags);
+        let mut per_pixel = scalar::ScalarReach::new(w, h);
+        per_pixel.compute(&epi.pixels);
         for y in 0..h {
             for x in 0..w {
                 let m = epi.reach.mask24(x, y);
+                assert_eq!(per_pixel.mask24(x, y), m, "{w}x{h}: pixel ({x},{y}): per-pixel and bit-sliced differ");
                 for k in (0..25).filter(|&k| k != 12) {
                     let (dx, dy) = offset(k);
                     let want = oracle(&epi, x as i64, y as i64, (dx as i64, dy as i64));
@@ -134,7 +137,7 @@ fn reachability_is_symmetric() {
     let points = random_points(40, 30, 0.3, &mut rng);
     let mut epi = random_epi(&points, 8, 12, false, &mut rng);
     epi.neighbours.compute(&epi.pixels, &epi.flags);
-    epi.reach.compute(&epi.neighbours);
+    epi.reach.compute(&epi.neighbours, &epi.flags);
     for y in 0..30i64 {
         for x in 0..40i64 {
             let m = epi.reach.mask24(x as usize, y as usize);
@@ -158,7 +161,7 @@ fn an_edge_free_image_reaches_its_whole_window() {
     let points = random_points(100, 7, 0.5, &mut rng);
     let mut epi = random_epi(&points, 0, 0, false, &mut rng);
     epi.neighbours.compute(&epi.pixels, &epi.flags);
-    epi.reach.compute(&epi.neighbours);
+    epi.reach.compute(&epi.neighbours, &epi.flags);
     for y in 0..7usize {
         for x in 0..100usize {
             let mut want = 0;

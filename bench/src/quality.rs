@@ -1,0 +1,176 @@
+//! `edgepoint-bench quality`: image quality of edge-and-point reconstruction against the
+//! Render Cache's interpolation from the same samples (paper 000 Fig. 11), as PSNR and SSIM
+//! against the converged reference.
+//!
+//! One fixed set of jittered pixels is shaded once per scene (in-process, deterministic); the
+//! sample set of each density is the pixels whose hashed rank is below it (so the 1 % set is
+//! part of the 5 % set, which is part of the 20 % set). Each set goes into a Render Cache,
+//! is reprojected once, and is reconstructed both ways.
+use crate::inprocess::{cache_with, jittered_picks, write_png, Staged};
+use anyhow::{bail, Result};
+use edgepoint_server::edges::brute::scene_edges;
+use edgepoint_server::epi::{Epi, InterpOptions, OwnSample, Overlay};
+use edgepoint_server::image_metrics::{psnr, ssim};
+use edgepoint_server::stage_times::StageTimes;
+use glam::{Affine3A, Vec3};
+use serde_json::json;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct QualityArgs {
+    /// Scene (repeatable): a built-in name or a .ply / .obj file (a bare model is staged on a
+    /// floor under a point light).
+    #[arg(long)]
+    pub scene: Vec<String>,
+    /// The four scenes of the issue: cornell-point (hard shadows), cornell (soft shadows), and
+    /// the bunny and the dragon from --data on a floor under a point light.
+    #[arg(long)]
+    pub all: bool,
+    /// Directory of the shared models (bunny/bun_zipper.ply, dragon/dragon_vrip.ply).
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))]
+    pub data: PathBuf,
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Fractions of pixels holding a sample (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.2")]
+    pub densities: Vec<f64>,
+    /// Samples per pixel of the converged reference.
+    #[arg(long, default_value_t = 64)]
+    pub reference_spp: u32,
+    /// Directory caching converged references (shared with `frame`).
+    #[arg(long, default_value = "target/edgepoint-refs")]
+    pub ref_cache: PathBuf,
+    /// Seed of the pixel set and its jitter.
+    #[arg(long, default_value_t = 0x5a3e)]
+    pub seed: u64,
+    /// Shader parameter KEY=VALUE (repeatable), e.g. shadow_rays=16.
+    #[arg(long = "shader-param", value_parser = crate::frame::parse_param)]
+    pub shader_params: Vec<(String, f64)>,
+    /// Write the reference, both reconstructions and the EPI class overlay of every density
+    /// as PNG files into DIR/<scene>/.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Tuning: interpolation kernel sigma in pixels.
+    #[arg(long, default_value_t = edgepoint_server::epi::DEFAULT_SIGMA)]
+    pub sigma: f32,
+    /// Tuning: filter a pixel's own sample with its neighbours instead of showing it.
+    #[arg(long)]
+    pub filter_own: bool,
+    /// Tuning: leave pixels that reach no sample at the background colour.
+    #[arg(long)]
+    pub no_fallback: bool,
+    /// Turn the complex filter off.
+    #[arg(long)]
+    pub no_complex_filter: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: QualityArgs) -> Result<()> {
+    let mut scenes = args.scene.clone();
+    if args.all {
+        for s in ["cornell-point", "cornell"] {
+            scenes.push(s.to_string());
+        }
+        for m in ["bunny/bun_zipper.ply", "dragon/dragon_vrip.ply"] {
+            scenes.push(args.data.join(m).display().to_string());
+        }
+    }
+    if scenes.is_empty() {
+        bail!("name a scene with --scene (repeatable) or use --all");
+    }
+    if let Some(d) = args.densities.iter().find(|d| !(**d > 0.0 && **d <= 1.0)) {
+        bail!("--densities: {d} is not in (0, 1]");
+    }
+    let params: HashMap<String, f64> = args.shader_params.iter().cloned().collect();
+    let options = InterpOptions {
+        sigma: args.sigma,
+        own_sample: if args.filter_own { OwnSample::Filter } else { OwnSample::Show },
+        fallback: !args.no_fallback,
+    };
+    let (w, h) = (args.width, args.height);
+    let mut results = Vec::new();
+    let mut table = String::new();
+    use std::fmt::Write;
+    writeln!(table, "quality at {w}x{h} vs {} spp reference (PSNR dB / SSIM)", args.reference_spp)?;
+    writeln!(table, "  {:<16} {:>7} {:>8} | {:>16} {:>16} | {:>7} | {:>6} {:>6} {:>6}", "scene", "density", "samples", "render cache", "edge-and-point", "dPSNR", "simple", "cmplx", "ambig")?;
+    for name in &scenes {
+        let staged = Staged::load(name, "direct", &params)?;
+        let tag = std::path::Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into_owned());
+        let (reference, cached) = staged.reference(w, h, args.reference_spp, &args.ref_cache)?;
+        tracing::info!("{name}: reference {}", if cached { "from the cache" } else { "rendered" });
+        let cam = staged.camera(w, h);
+        let top = args.densities.iter().cloned().fold(0.0, f64::max);
+        let picks = jittered_picks(w, h, top, args.seed);
+        let shaded = staged.shade(&cam, &picks, args.seed);
+        let transforms: Vec<Affine3A> = staged.loaded.scene.objects.iter().map(|o| o.transform).collect();
+        let mut edges = Vec::new();
+        scene_edges(&staged.loaded.scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+        let background = staged.loaded.scene.background;
+        let dir = args.out.as_ref().map(|d| d.join(&tag));
+        if let Some(d) = &dir {
+            std::fs::create_dir_all(d)?;
+            write_png(&d.join("reference.png"), w, h, &reference)?;
+        }
+        let mut epi = Epi::new(w, h);
+        for &density in &args.densities {
+            let samples: Vec<_> = picks.iter().zip(&shaded).filter(|(p, _)| (p.rank as f64) < density).map(|(_, s)| *s).collect();
+            let mut cache = cache_with(w, h, &cam, &samples, background);
+            let mut t = StageTimes::new();
+            cache.interpolate_gaps(&mut t);
+            let baseline = cache.image().to_vec();
+            let counts = epi.build(&edges, &cam, cache.point_image(), !args.no_complex_filter, &mut t);
+            let (points, image, weights) = cache.reconstruction_target();
+            epi.reconstruct(points, background, &options, !args.no_complex_filter, image, weights, &mut t);
+            let epr = cache.image().to_vec();
+            let (pb, pe) = (psnr(&baseline, &reference), psnr(&epr, &reference));
+            let (sb, se) = (ssim(&baseline, &reference, w, h), ssim(&epr, &reference, w, h));
+            writeln!(
+                table,
+                "  {:<16} {:>6.1}% {:>8} | {:>7.2} / {:.4} {:>7.2} / {:.4} | {:>+7.2} | {:>6} {:>6} {:>6}",
+                tag,
+                density * 100.0,
+                samples.len(),
+                pb,
+                sb,
+                pe,
+                se,
+                pe - pb,
+                counts.simple,
+                counts.complex,
+                counts.ambiguous_samples
+            )?;
+            results.push(json!({
+                "scene": name, "density": density, "samples": samples.len(),
+                "render_cache": { "psnr_db": pb, "ssim": sb },
+                "edge_and_point": { "psnr_db": pe, "ssim": se },
+                "psnr_gain_db": pe - pb,
+                "pixel_classes": { "empty": counts.empty, "simple": counts.simple, "complex": counts.complex },
+                "samples_usable": counts.usable_samples, "samples_ambiguous": counts.ambiguous_samples,
+                "edges": edges.len(), "fragments": counts.raster.fragments, "culled": counts.raster.culled,
+            }));
+            if let Some(d) = &dir {
+                let pct = format!("{:04.1}", density * 100.0);
+                write_png(&d.join(format!("render_cache_{pct}.png")), w, h, &baseline)?;
+                write_png(&d.join(format!("epr_{pct}.png")), w, h, &epr)?;
+                let mut classes = epr.clone();
+                epi.draw_overlay(Overlay::Classes, &mut classes);
+                write_png(&d.join(format!("classes_{pct}.png")), w, h, &classes)?;
+                let mut samples_img: Vec<Vec3> = epr.clone();
+                epi.draw_overlay(Overlay::Samples, &mut samples_img);
+                write_png(&d.join(format!("samples_{pct}.png")), w, h, &samples_img)?;
+            }
+        }
+    }
+    let out = json!({
+        "width": w, "height": h, "reference_spp": args.reference_spp, "seed": args.seed,
+        "options": { "sigma": options.sigma, "own_sample": format!("{:?}", options.own_sample), "fallback": options.fallback, "complex_filter": !args.no_complex_filter },
+        "results": results,
+    });
+    crate::emit(args.json, &out, &table);
+    Ok(())
+}
