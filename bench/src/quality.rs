@@ -11,6 +11,8 @@ use anyhow::{bail, Result};
 use edgepoint_server::edges::brute::scene_edges;
 use edgepoint_server::epi::{Epi, InterpOptions, OwnSample, Overlay};
 use edgepoint_server::image_metrics::{psnr, ssim};
+use edgepoint_server::epi::spread::BaselineHoles;
+use edgepoint_server::render_cache::holes::HoleFill;
 use edgepoint_server::stage_times::StageTimes;
 use glam::{Affine3A, Vec3};
 use serde_json::json;
@@ -59,9 +61,20 @@ pub struct QualityArgs {
     /// Tuning: filter a pixel's own sample with its neighbours instead of showing it.
     #[arg(long)]
     pub filter_own: bool,
-    /// Tuning: leave pixels that reach no sample at the background colour.
+    /// Tuning: pixels that reach no sample take the unconstrained window mean (edge-blind)
+    /// instead of spreading colour from their region.
     #[arg(long)]
-    pub no_fallback: bool,
+    pub fallback: bool,
+    /// Leave the pixels no sample reaches at the background in both reconstructions (the
+    /// renderer spreads colour into them from their neighbours — within their region for
+    /// edge-and-point, ignoring edges for the baseline — then fills the rest from coarser
+    /// sample averages).
+    #[arg(long)]
+    pub no_hole_fill: bool,
+    /// Ablation: run edge-and-point reconstruction with no edges at all (what remains of its
+    /// gain is not the edges' doing).
+    #[arg(long)]
+    pub no_edges: bool,
     /// Turn the complex filter off.
     #[arg(long)]
     pub no_complex_filter: bool,
@@ -90,14 +103,18 @@ pub fn run(args: QualityArgs) -> Result<()> {
     let options = InterpOptions {
         sigma: args.sigma,
         own_sample: if args.filter_own { OwnSample::Filter } else { OwnSample::Show },
-        fallback: !args.no_fallback,
+        fallback: args.fallback,
     };
     let (w, h) = (args.width, args.height);
     let mut results = Vec::new();
     let mut table = String::new();
     use std::fmt::Write;
     writeln!(table, "quality at {w}x{h} vs {} spp reference (PSNR dB / SSIM)", args.reference_spp)?;
-    writeln!(table, "  {:<16} {:>7} {:>8} | {:>16} {:>16} | {:>7} | {:>6} {:>6} {:>6}", "scene", "density", "samples", "render cache", "edge-and-point", "dPSNR", "simple", "cmplx", "ambig")?;
+    writeln!(
+        table,
+        "  {:<16} {:>7} {:>8} | {:>16} {:>16} | {:>7} | {:>6} {:>6} {:>6} {:>7} {:>7}",
+        "scene", "density", "samples", "render cache", "edge-and-point", "dPSNR", "simple", "cmplx", "ambig", "spread", "holes"
+    )?;
     for name in &scenes {
         let staged = Staged::load(name, "direct", &params)?;
         let tag = std::path::Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into_owned());
@@ -109,7 +126,9 @@ pub fn run(args: QualityArgs) -> Result<()> {
         let shaded = staged.shade(&cam, &picks, args.seed);
         let transforms: Vec<Affine3A> = staged.loaded.scene.objects.iter().map(|o| o.transform).collect();
         let mut edges = Vec::new();
-        scene_edges(&staged.loaded.scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+        if !args.no_edges {
+            scene_edges(&staged.loaded.scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+        }
         let background = staged.loaded.scene.background;
         let dir = args.out.as_ref().map(|d| d.join(&tag));
         if let Some(d) = &dir {
@@ -117,21 +136,31 @@ pub fn run(args: QualityArgs) -> Result<()> {
             write_png(&d.join("reference.png"), w, h, &reference)?;
         }
         let mut epi = Epi::new(w, h);
+        let mut fill = HoleFill::new(w, h);
+        let mut baseline_holes = BaselineHoles::default();
         for &density in &args.densities {
             let samples: Vec<_> = picks.iter().zip(&shaded).filter(|(p, _)| (p.rank as f64) < density).map(|(_, s)| *s).collect();
             let mut cache = cache_with(w, h, &cam, &samples, background);
             let mut t = StageTimes::new();
+            // Both reconstructions as the renderer runs them, holes filled the same way.
             cache.interpolate_gaps(&mut t);
+            let (points, image, weights) = cache.reconstruction_target();
+            if !args.no_hole_fill {
+                baseline_holes.fill(points, weights, image, &mut fill);
+            }
             let baseline = cache.image().to_vec();
             let counts = epi.build(&edges, &cam, cache.point_image(), !args.no_complex_filter, &mut t);
             let (points, image, weights) = cache.reconstruction_target();
-            epi.reconstruct(points, background, &options, !args.no_complex_filter, image, weights, &mut t);
+            let rec = epi.reconstruct(points, background, &options, !args.no_complex_filter, image, weights, &mut t);
+            if !args.no_hole_fill {
+                fill.fill(points, epi.holes(), image);
+            }
             let epr = cache.image().to_vec();
             let (pb, pe) = (psnr(&baseline, &reference), psnr(&epr, &reference));
             let (sb, se) = (ssim(&baseline, &reference, w, h), ssim(&epr, &reference, w, h));
             writeln!(
                 table,
-                "  {:<16} {:>6.1}% {:>8} | {:>7.2} / {:.4} {:>7.2} / {:.4} | {:>+7.2} | {:>6} {:>6} {:>6}",
+                "  {:<16} {:>6.1}% {:>8} | {:>7.2} / {:.4} {:>7.2} / {:.4} | {:>+7.2} | {:>6} {:>6} {:>6} {:>7} {:>7}",
                 tag,
                 density * 100.0,
                 samples.len(),
@@ -142,7 +171,9 @@ pub fn run(args: QualityArgs) -> Result<()> {
                 pe - pb,
                 counts.simple,
                 counts.complex,
-                counts.ambiguous_samples
+                counts.ambiguous_samples,
+                rec.spread,
+                rec.interp.empty
             )?;
             results.push(json!({
                 "scene": name, "density": density, "samples": samples.len(),
@@ -151,6 +182,8 @@ pub fn run(args: QualityArgs) -> Result<()> {
                 "psnr_gain_db": pe - pb,
                 "pixel_classes": { "empty": counts.empty, "simple": counts.simple, "complex": counts.complex },
                 "samples_usable": counts.usable_samples, "samples_ambiguous": counts.ambiguous_samples,
+                "pixels_unreached_fallback": rec.interp.fallback, "pixels_spread": rec.spread,
+                "pixels_without_reachable_sample": rec.interp.empty,
                 "edges": edges.len(), "fragments": counts.raster.fragments, "culled": counts.raster.culled,
             }));
             if let Some(d) = &dir {
@@ -168,7 +201,7 @@ pub fn run(args: QualityArgs) -> Result<()> {
     }
     let out = json!({
         "width": w, "height": h, "reference_spp": args.reference_spp, "seed": args.seed,
-        "options": { "sigma": options.sigma, "own_sample": format!("{:?}", options.own_sample), "fallback": options.fallback, "complex_filter": !args.no_complex_filter },
+        "options": { "sigma": options.sigma, "own_sample": format!("{:?}", options.own_sample), "fallback": options.fallback, "complex_filter": !args.no_complex_filter, "hole_fill": !args.no_hole_fill },
         "results": results,
     });
     crate::emit(args.json, &out, &table);

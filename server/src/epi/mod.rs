@@ -8,6 +8,8 @@
 //!    regions and sides through the [`tables`] (§4.1–4.4, §5.1);
 //! 4. [`reach`] — reachability in the 5 × 5 neighbourhood (§5.2);
 //! 5. [`interpolate`] — edge-respecting interpolation; its weights drive sampling (§5.3);
+//!    [`spread`] then colours the pixels that reach no sample from their neighbours within
+//!    the same region (our addition);
 //! 6. [`antialias`] — anti-aliasing of simple pixels (§5.3);
 //! 7. [`complex`] — the complex-pixel filter (§5.4);
 //! 8. [`overlay`] — diagnostic views of the EPI.
@@ -23,6 +25,7 @@ pub mod interpolate;
 pub mod overlay;
 pub mod raster;
 pub mod reach;
+pub mod spread;
 pub mod tables;
 mod testutil;
 
@@ -46,6 +49,8 @@ pub const STAGE_EDGES: &str = "edges";
 pub const STAGE_RASTERIZE: &str = "rasterize";
 pub const STAGE_REACH: &str = "reach";
 pub const STAGE_INTERPOLATE: &str = "interpolate";
+/// Spreading colour into pixels that reach no sample (not a column of paper Table 2).
+pub const STAGE_SPREAD: &str = "spread";
 pub const STAGE_ANTIALIAS: &str = "antialias";
 pub const STAGE_COMPLEX: &str = "complex";
 
@@ -106,6 +111,8 @@ pub struct EpiCounts {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ReconstructCounts {
     pub interp: InterpCounts,
+    /// Pixels that reached no sample and took colour from their region's neighbours.
+    pub spread: u32,
     /// Simple pixels that took a secondary colour.
     pub antialiased: u32,
     /// Complex pixels refined by the complex filter.
@@ -123,9 +130,12 @@ pub struct Epi {
     flags: Flags,
     /// Bit rows: pixels whose colour came from samples (interpolation output).
     filled: Vec<u64>,
+    /// Bit rows: pixels with no sample in their window (interpolation output).
+    holes: Vec<u64>,
     neighbours: reach::Neighbours,
     reach: reach::Reach,
     simple: antialias::SimpleColours,
+    spread: spread::Spread,
     counts: EpiCounts,
 }
 
@@ -141,10 +151,12 @@ impl Epi {
             bounds: raster::Boundaries::new(w, h),
             pixels: vec![EpiPixel::default(); w * h],
             filled: vec![0; h * flags.words],
+            holes: vec![0; h * flags.words],
             flags,
             neighbours: reach::Neighbours::new(w, h),
             reach: reach::Reach::new(w, h),
             simple: antialias::SimpleColours::default(),
+            spread: spread::Spread::default(),
             counts: EpiCounts::default(),
         }
     }
@@ -246,8 +258,9 @@ impl Epi {
                 options: *options,
                 background,
             };
-            interpolate::interpolate(&input, image, weights, &mut self.filled)
+            interpolate::interpolate(&input, image, weights, &mut self.filled, &mut self.holes)
         });
+        let spread = times.time(STAGE_SPREAD, || self.spread.run(&self.neighbours, &mut self.filled, &mut self.holes, image));
         let antialiased = times.time(STAGE_ANTIALIAS, || {
             antialias::antialias(&self.pixels, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image)
         });
@@ -258,7 +271,14 @@ impl Epi {
                 complex::complex_filter(&input, image)
             });
         }
-        ReconstructCounts { interp, antialiased, complex_refined }
+        ReconstructCounts { interp, spread, antialiased, complex_refined }
+    }
+
+    /// Bit rows (`ceil(width / 64)` words per row) of the pixels the last reconstruction left
+    /// at the background: no sample in their window (see
+    /// [`crate::render_cache::holes::HoleFill`]).
+    pub fn holes(&self) -> &[u64] {
+        &self.holes
     }
 
     /// Draws a diagnostic overlay of the last build over `image`.
@@ -296,9 +316,11 @@ impl Epi {
             ("EPI pixels (edge code, sample region, flags)", 2 * self.pixels.len()),
             ("flag planes", self.flags.bytes()),
             ("interpolated-flag plane", 8 * self.filled.len()),
+            ("hole plane", 8 * self.holes.len()),
             ("neighbour masks", self.neighbours.bytes()),
             ("reachability masks", self.reach.bytes()),
             ("simple-pixel colours (anti-aliasing)", self.simple.bytes()),
+            ("spreading queues", self.spread.bytes()),
             ("rasterizer segments and bins", self.raster.bytes()),
         ]
     }

@@ -17,6 +17,7 @@
 //!
 //! No networking here; all per-frame buffers are allocated once in [`RenderCache::new`].
 
+pub mod holes;
 mod interpolate;
 mod reproject;
 

@@ -19,6 +19,8 @@ use super::{Input, SessionParams};
 use crate::edges::{brute::scene_edges, EdgeSegment};
 use crate::encode::{effective_encoding, encode_frame};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
+use crate::epi::spread::BaselineHoles;
+use crate::render_cache::holes::HoleFill;
 use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
@@ -48,6 +50,8 @@ pub fn max_outstanding(per_frame: usize, rate: f64) -> usize {
     }
     ((rate * TARGET_SAMPLE_LATENCY.as_secs_f64()) as usize).clamp(per_frame, most)
 }
+/// Stage name of hole filling (not a column of paper Table 2).
+pub const STAGE_HOLES: &str = "holes";
 /// How often a waiting loop checks whether the viewer is gone.
 const POLL: Duration = Duration::from_millis(50);
 
@@ -89,6 +93,8 @@ pub(super) struct FrameLoop {
     epi: Epi,
     /// The frame's discontinuity segments.
     edges: Vec<EdgeSegment>,
+    holes: HoleFill,
+    baseline_holes: BaselineHoles,
     sampler: Sampler,
     dispatcher: Dispatcher,
     ring: RequestRing,
@@ -137,6 +143,8 @@ impl FrameLoop {
             cache,
             epi: Epi::new(p.width, p.height),
             edges: Vec::new(),
+            holes: HoleFill::new(p.width, p.height),
+            baseline_holes: BaselineHoles::default(),
             sampler: Sampler::new(p.width, p.height, p.seed),
             dispatcher,
             ring,
@@ -251,6 +259,17 @@ impl FrameLoop {
             let (with_point, filled, empty) = self.cache.interpolate_gaps(&mut self.times);
             FrameCounts { with_point, filled, empty, occluded, cache_points }
         };
+        // Pixels no sample reached (edge-and-point reconstruction has spread colour into
+        // those its regions connect to): the pyramid fill, after an edge-blind spread for
+        // the baseline.
+        let t = Instant::now();
+        let (points, image, weights) = self.cache.reconstruction_target();
+        if epr {
+            self.holes.fill(points, self.epi.holes(), image);
+        } else {
+            self.baseline_holes.fill(points, weights, image, &mut self.holes);
+        }
+        self.times.add(STAGE_HOLES, ms_since(t));
         (counts, epi_counts)
     }
 

@@ -12,9 +12,10 @@
 //!
 //! A pixel with its own usable sample shows it as shaded ([`OwnSample::Show`], the Render
 //! Cache rule) or filters it with its neighbours ([`OwnSample::Filter`]). A pixel that
-//! reaches no sample falls back to the unconstrained mean of its window (what the Render
-//! Cache baseline shows there), and to the background when its window has no sample at
-//! all; its weight stays 0 so sampling treats it as unreached.
+//! reaches no sample is left at the background and marked a hole, for
+//! [`super::spread`] to colour from its region (optionally, [`InterpOptions::fallback`],
+//! it takes the unconstrained mean of its window instead, as the Render Cache baseline
+//! would); its weight stays 0 so sampling treats it as unreached.
 //!
 //! Bit-sliced like [`super::reach`]: for 64 pixels of a row and one window offset, the
 //! pixels that reach a usable sample there are one AND of three words; the work per pixel
@@ -43,13 +44,14 @@ pub enum OwnSample {
 pub struct InterpOptions {
     pub sigma: f32,
     pub own_sample: OwnSample,
-    /// Fall back to the unconstrained window mean where no sample is reachable.
+    /// Fall back to the unconstrained window mean where no sample is reachable (edge-blind;
+    /// off by default: spreading within the region does better, see the bench `quality`).
     pub fallback: bool,
 }
 
 impl Default for InterpOptions {
     fn default() -> Self {
-        InterpOptions { sigma: DEFAULT_SIGMA, own_sample: OwnSample::Show, fallback: true }
+        InterpOptions { sigma: DEFAULT_SIGMA, own_sample: OwnSample::Show, fallback: false }
     }
 }
 
@@ -101,9 +103,10 @@ pub struct InterpInput<'a> {
 /// Rows per parallel task.
 const BAND_ROWS: usize = 16;
 
-/// Fills `image` (primary-region colours), `weights` (un-normalised reachable weight) and
-/// the `filled` bit rows (pixels whose colour came from reachable samples or their own).
-pub fn interpolate(input: &InterpInput, image: &mut [Vec3], weights: &mut [f32], filled: &mut [u64]) -> InterpCounts {
+/// Fills `image` (primary-region colours), `weights` (un-normalised reachable weight), the
+/// `filled` bit rows (pixels whose colour came from reachable samples or their own) and the
+/// `holes` bit rows (pixels without a sample in their window: background colour).
+pub fn interpolate(input: &InterpInput, image: &mut [Vec3], weights: &mut [f32], filled: &mut [u64], holes: &mut [u64]) -> InterpCounts {
     let (w, words) = (input.flags.width, input.flags.words);
     if w == 0 || words == 0 {
         return InterpCounts::default();
@@ -112,8 +115,9 @@ pub fn interpolate(input: &InterpInput, image: &mut [Vec3], weights: &mut [f32],
         .par_chunks_mut(BAND_ROWS * w)
         .zip(weights.par_chunks_mut(BAND_ROWS * w))
         .zip(filled.par_chunks_mut(BAND_ROWS * words))
+        .zip(holes.par_chunks_mut(BAND_ROWS * words))
         .enumerate()
-        .map(|(b, ((img, wt), fl))| SCRATCH.with_borrow_mut(|scratch| interpolate_band(input, b * BAND_ROWS, img, wt, fl, scratch)))
+        .map(|(b, (((img, wt), fl), ho))| SCRATCH.with_borrow_mut(|scratch| interpolate_band(input, b * BAND_ROWS, img, wt, fl, ho, scratch)))
         .reduce(InterpCounts::default, |a, b| a + b)
 }
 
@@ -182,7 +186,8 @@ fn quiet_bits(f: &Flags, y: usize, j: usize) -> u64 {
 /// their sums from five of those rows (the separable filter, SIMD over the four channels),
 /// and only pixels near edges gather sample by sample under the reachability masks.
 #[inline(never)]
-fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [f32], fl: &mut [u64], scratch: &mut Vec<[f32; 4]>) -> InterpCounts {
+#[allow(clippy::too_many_arguments)]
+fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [f32], fl: &mut [u64], ho: &mut [u64], scratch: &mut Vec<[f32; 4]>) -> InterpCounts {
     let f = input.flags;
     let (w, h, words) = (f.width, f.height, f.words);
     let rows = img.len() / w;
@@ -204,7 +209,8 @@ fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [
     let mut counts = InterpCounts::default();
     for r in 0..rows {
         let y = y0 + r;
-        let (img, wt, fl) = (&mut img[r * w..(r + 1) * w], &mut wt[r * w..(r + 1) * w], &mut fl[r * words..(r + 1) * words]);
+        let (img, wt) = (&mut img[r * w..(r + 1) * w], &mut wt[r * w..(r + 1) * w]);
+        let (fl, ho) = (&mut fl[r * words..(r + 1) * words], &mut ho[r * words..(r + 1) * words]);
         for j in 0..words {
             let plan = WordPlan::new(input, y, j);
             let mut acc = [[0f32; 4]; 64];
@@ -223,7 +229,7 @@ fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [
             if plan.complex != 0 {
                 window_sum(input, y, j, plan.complex, Flags::HAS, false, &mut acc);
             }
-            counts = counts + finish_word(input, y, j, &plan, &mut acc, img, wt, &mut fl[j]);
+            counts = counts + finish_word(input, y, j, &plan, &mut acc, img, wt, &mut fl[j], &mut ho[j]);
         }
     }
     counts
@@ -313,7 +319,17 @@ fn each_bit(mut bits: u64, mut f: impl FnMut(usize)) {
 /// Colours, weights and filled bits of word `j` of row `y` from the window sums `acc`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn finish_word(input: &InterpInput, y: usize, j: usize, plan: &WordPlan, acc: &mut [[f32; 4]; 64], img: &mut [Vec3], wt: &mut [f32], fl: &mut u64) -> InterpCounts {
+fn finish_word(
+    input: &InterpInput,
+    y: usize,
+    j: usize,
+    plan: &WordPlan,
+    acc: &mut [[f32; 4]; 64],
+    img: &mut [Vec3],
+    wt: &mut [f32],
+    fl: &mut u64,
+    holes: &mut u64,
+) -> InterpCounts {
     let w = input.flags.width;
     let x0 = 64 * j;
     let n = (w - x0).min(64);
@@ -363,6 +379,7 @@ fn finish_word(input: &InterpInput, y: usize, j: usize, plan: &WordPlan, acc: &m
         counts.fallback = (missing & !still_missing).count_ones();
     }
     each_bit(still_missing, |i| img[i] = input.background);
+    *holes = still_missing;
     // Pixel counts: with a point / without a point but coloured / background.
     counts.empty = (still_missing & !plan.has).count_ones();
     counts.filled = (plan.valid & !plan.has & !still_missing).count_ones();
