@@ -121,6 +121,70 @@ impl Staged {
     }
 }
 
+impl Staged {
+    /// Pixels within `radius` pixels of a hard shadow boundary: where the visibility of some
+    /// point light from the surface seen through the pixel centre changes between
+    /// neighbouring pixels (ray cast in-process). `None` when the scene has no point light.
+    /// Used to tell how much of an image's error lies at shadow boundaries, which the EPI
+    /// cannot respect before shadow edges exist.
+    pub fn shadow_boundaries(&self, cam: &CameraFrame, radius: usize) -> Option<Vec<bool>> {
+        let lights: Vec<Vec3> = self
+            .loaded
+            .scene
+            .lights
+            .iter()
+            .filter_map(|l| match l {
+                edgepoint_scene::Light::Point { position, .. } => Some(*position),
+                _ => None,
+            })
+            .take(32)
+            .collect();
+        if lights.is_empty() {
+            return None;
+        }
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let inst = self.loaded.instances(&self.loaded.default_transforms());
+        let eps = self.loaded.epsilon;
+        use rayon::prelude::*;
+        // Per pixel: bit l set when point light l is visible; u64::MAX for a miss.
+        let vis: Vec<u64> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (o, d) = cam.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                let Some(hit) = inst.closest_hit(&self.loaded.bvh, o, d, 0.0, f32::INFINITY) else { return u64::MAX };
+                let n = if hit.normal.dot(d) < 0.0 { hit.normal } else { -hit.normal };
+                let origin = hit.position + n * eps;
+                lights.iter().enumerate().fold(0u64, |acc, (l, &pos)| {
+                    let to = pos - origin;
+                    let dist = to.length();
+                    let seen = n.dot(to) > 0.0 && inst.occluded(&self.loaded.bvh, origin, to / dist, 0.0, dist * (1.0 - 1e-4)).is_none();
+                    acc | (u64::from(seen) << l)
+                })
+            })
+            .collect();
+        let r = radius as i64;
+        Some(
+            (0..w * h)
+                .into_par_iter()
+                .map(|i| {
+                    let (x, y) = ((i % w) as i64, (i / w) as i64);
+                    let here = vis[i];
+                    (-r..=r).any(|dy| {
+                        (-r..=r).any(|dx| {
+                            let (nx, ny) = (x + dx, y + dy);
+                            if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                                return false;
+                            }
+                            let other = vis[ny as usize * w + nx as usize];
+                            here != u64::MAX && other != u64::MAX && other != here
+                        })
+                    })
+                })
+                .collect(),
+        )
+    }
+}
+
 /// One pixel to shade and the position inside it.
 #[derive(Debug, Clone, Copy)]
 pub struct Pick {

@@ -56,9 +56,9 @@ impl SimpleColours {
         let mut total = 0u32;
         for y in 0..h {
             let row = flags.row(y, Flags::SIMPLE);
-            for j in 0..words {
-                self.rank[y * words + j] = total;
-                total += row[j].count_ones();
+            for (rank, word) in self.rank[y * words..(y + 1) * words].iter_mut().zip(row) {
+                *rank = total;
+                total += word.count_ones();
             }
         }
         self.primary.resize(total as usize, Vec3::ZERO);

@@ -143,6 +143,8 @@ impl Cell {
     /// where the top mantissa bits of an `f32` are `floor(t * R)` — no float-to-int
     /// conversion, which costs more than the rest of a pixel's classification.
     #[inline]
+    // `max` then `min` rather than `clamp`: NaN must become 0, and `clamp` keeps NaN.
+    #[allow(clippy::manual_clamp)]
     pub fn region_of(self, u: f32, v: f32) -> u32 {
         let bits = self.regions.trailing_zeros();
         let q = |t: f32| ((t.max(0.0).min(0.999_999) + 1.0).to_bits() >> (23 - bits)) & (self.regions - 1);

@@ -143,7 +143,9 @@ mod tests {
         for i in 0..w * h {
             let has = rng.chance(density);
             pi.point.push(if has { i as u32 } else { crate::render_cache::NO_POINT });
-            pi.depth.push(if !has { f32::INFINITY } else if rng.chance(0.05) { f32::INFINITY } else { 1.0 + 9.0 * rng.f32() });
+            // Some points are misses (at infinity).
+            let miss = rng.chance(0.05);
+            pi.depth.push(if !has || miss { f32::INFINITY } else { 1.0 + 9.0 * rng.f32() });
             pi.subpixel.push([0.5, 0.5]);
             pi.color.push(Vec3::ZERO);
             pi.age.push(0.0);

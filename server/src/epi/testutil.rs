@@ -24,7 +24,7 @@ impl Rng {
 
     /// Uniform in 0..n.
     pub fn below(&mut self, n: u32) -> u32 {
-        ((self.next() >> 32) * n as u64 >> 32) as u32
+        (((self.next() >> 32) * n as u64) >> 32) as u32
     }
 
     pub fn chance(&mut self, p: f64) -> bool {

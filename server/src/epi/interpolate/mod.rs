@@ -387,6 +387,7 @@ fn finish_word(
 }
 
 /// Adds `weight * colour` of the samples at window offset `k` of the pixels in `bits`.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn gather(points: &PointImage, w: usize, y: usize, x0: usize, k: usize, weight: f32, bits: u64, acc: &mut [[f32; 4]; 64]) {
     let (dx, dy) = offset(k);

@@ -289,7 +289,8 @@ impl Band<'_> {
         } else {
             return;
         };
-        if !(tlo <= thi) {
+        // (NaN from a degenerate segment fails too.)
+        if tlo > thi || tlo.is_nan() || thi.is_nan() {
             return;
         }
         let inv_depth = |t: f64| s.w0 + t * (s.w1 - s.w0);
