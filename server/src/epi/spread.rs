@@ -25,7 +25,6 @@ pub const MAX_LAYERS: usize = 16;
 pub struct Spread {
     frontier: Vec<u32>,
     next: Vec<u32>,
-    colours: Vec<Vec3>,
     /// Bit rows: queued for the next layer.
     queued: Vec<u64>,
 }
@@ -33,7 +32,7 @@ pub struct Spread {
 impl Spread {
     /// Bytes held (proportional to the pixels spread to in the worst frame).
     pub fn bytes(&self) -> usize {
-        4 * (self.frontier.capacity() + self.next.capacity()) + 12 * self.colours.capacity() + 8 * self.queued.capacity()
+        4 * (self.frontier.capacity() + self.next.capacity()) + 8 * self.queued.capacity()
     }
 
     /// Spreads colours into the pixels set in `targets` (bit rows, cleared as they are
@@ -110,8 +109,8 @@ impl Spread {
             if self.frontier.is_empty() {
                 break;
             }
-            // Colours of this layer from earlier layers only.
-            self.colours.clear();
+            // Colours of this layer from earlier layers only: a pixel of the layer reads only
+            // filled neighbours, and the layer is marked filled after all of it is coloured.
             for &p in &self.frontier {
                 let (x, y) = (p as usize % w, p as usize / w);
                 let (mut sum, mut n) = (Vec3::ZERO, 0u32);
@@ -121,12 +120,11 @@ impl Spread {
                         n += 1;
                     }
                 });
-                self.colours.push(sum / n.max(1) as f32);
+                image[p as usize] = sum / n.max(1) as f32;
             }
             self.next.clear();
-            for (&p, &c) in self.frontier.iter().zip(&self.colours) {
+            for &p in &self.frontier {
                 let (x, y) = (p as usize % w, p as usize / w);
-                image[p as usize] = c;
                 filled[y * words + x / 64] |= 1 << (x % 64);
                 targets[y * words + x / 64] &= !(1 << (x % 64));
             }

@@ -19,7 +19,9 @@
 //!
 //! Bit-sliced like [`super::reach`]: for 64 pixels of a row and one window offset, the
 //! pixels that reach a usable sample there are one AND of three words; the work per pixel
-//! is then proportional to the samples it actually uses.
+//! is then proportional to the samples it actually uses. (A separable row/column filter
+//! for pixels whose windows hold no edge was measured slower than this at every sample
+//! density the renderer runs at, and removed.)
 use super::code::EpiPixel;
 use super::reach::{offset, shifted, Reach};
 use super::Flags;
@@ -117,13 +119,8 @@ pub fn interpolate(input: &InterpInput, image: &mut [Vec3], weights: &mut [f32],
         .zip(filled.par_chunks_mut(BAND_ROWS * words))
         .zip(holes.par_chunks_mut(BAND_ROWS * words))
         .enumerate()
-        .map(|(b, (((img, wt), fl), ho))| SCRATCH.with_borrow_mut(|scratch| interpolate_band(input, b * BAND_ROWS, img, wt, fl, ho, scratch)))
+        .map(|(b, (((img, wt), fl), ho))| interpolate_band(input, b * BAND_ROWS, img, wt, fl, ho))
         .reduce(InterpCounts::default, |a, b| a + b)
-}
-
-thread_local! {
-    /// Per-thread rows of the separable pass, kept across frames.
-    static SCRATCH: std::cell::RefCell<Vec<[f32; 4]>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Which pixels of a word need interpolation, and how.
@@ -165,47 +162,13 @@ fn valid_bits(w: usize, j: usize) -> u64 {
     }
 }
 
-/// The pixels of word `j` of row `y` whose 5 x 5 window holds no pixel with an edge: they
-/// reach their whole window, and every sample there is usable. The edge pixels dilated by
-/// two pixels, bit-sliced.
-#[inline(always)]
-fn quiet_bits(f: &Flags, y: usize, j: usize) -> u64 {
-    let mut near = 0u64;
-    for yy in y.saturating_sub(2)..(y + 3).min(f.height) {
-        let (s, c) = (f.row(yy, Flags::SIMPLE), f.row(yy, Flags::COMPLEX));
-        let e = |jj: usize| s[jj] | c[jj];
-        let (prev, here, next) = (if j > 0 { e(j - 1) } else { 0 }, e(j), if j + 1 < f.words { e(j + 1) } else { 0 });
-        near |= here | here << 1 | here << 2 | here >> 1 | here >> 2 | prev >> 63 | prev >> 62 | next << 63 | next << 62;
-    }
-    !near
-}
-
-/// Rows `y0 ..` (as many as `img` holds). When the band's pixels would gather many samples
-/// one by one, the usable samples of its rows (and two rows either side) are first filtered
-/// along the rows with the kernel's 1D factor; pixels whose window holds no edge then take
-/// their sums from five of those rows (the separable filter, SIMD over the four channels),
-/// and only pixels near edges gather sample by sample under the reachability masks.
-#[inline(never)]
+/// Rows `y0 ..` (as many as `img` holds).
 #[allow(clippy::too_many_arguments)]
-fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [f32], fl: &mut [u64], ho: &mut [u64], scratch: &mut Vec<[f32; 4]>) -> InterpCounts {
+#[inline(never)]
+fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [f32], fl: &mut [u64], ho: &mut [u64]) -> InterpCounts {
     let f = input.flags;
-    let (w, h, words) = (f.width, f.height, f.words);
+    let (w, words) = (f.width, f.words);
     let rows = img.len() / w;
-    let (mut need, mut samples) = (0usize, 0usize);
-    for y in y0..y0 + rows {
-        for j in 0..words {
-            let p = WordPlan::new(input, y, j);
-            need += (p.plain | p.complex).count_ones() as usize;
-            samples += p.has.count_ones() as usize;
-        }
-    }
-    // Gathering costs about a third of the row pass per sample: filter the rows when the
-    // band's pixels would gather more than three samples per pixel of the band.
-    let separable = need * samples * 25 > 3 * (rows * w) * (rows * w);
-    let (ya, yb) = (y0.saturating_sub(2), (y0 + rows + 2).min(h));
-    if separable {
-        row_pass(input, ya, yb, scratch);
-    }
     let mut counts = InterpCounts::default();
     for r in 0..rows {
         let y = y0 + r;
@@ -214,17 +177,8 @@ fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [
         for j in 0..words {
             let plan = WordPlan::new(input, y, j);
             let mut acc = [[0f32; 4]; 64];
-            let mut plain = plan.plain;
-            if separable && plain != 0 {
-                let quiet = quiet_bits(f, y, j) & plain;
-                if quiet != 0 {
-                    column_pass(input, scratch, ya, y, j, &mut acc);
-                    each_bit(!quiet & valid_bits(w, j), |i| acc[i] = [0.0; 4]);
-                    plain &= !quiet;
-                }
-            }
-            if plain != 0 {
-                window_sum(input, y, j, plain, Flags::USABLE, true, &mut acc);
+            if plan.plain != 0 {
+                window_sum(input, y, j, plan.plain, Flags::USABLE, true, &mut acc);
             }
             if plan.complex != 0 {
                 window_sum(input, y, j, plan.complex, Flags::HAS, false, &mut acc);
@@ -233,76 +187,6 @@ fn interpolate_band(input: &InterpInput, y0: usize, img: &mut [Vec3], wt: &mut [
         }
     }
     counts
-}
-
-/// The rows `ya .. yb` filtered along x: `scratch[(r - ya) * w + x]` = sum over dx of
-/// `g(dx) * (colour, 1)` of the usable samples at `x + dx`.
-fn row_pass(input: &InterpInput, ya: usize, yb: usize, scratch: &mut Vec<[f32; 4]>) {
-    let w = input.flags.width;
-    let g: [f32; 5] = std::array::from_fn(|i| input.kernel.0[10 + i]);
-    scratch.resize((yb - ya + 1) * w, [0.0; 4]);
-    let (rows, src) = scratch.split_at_mut((yb - ya) * w);
-    for y in ya..yb {
-        let usable = input.flags.row(y, Flags::USABLE);
-        let colours = &input.points.color[y * w..(y + 1) * w];
-        for (j, (s, c)) in src.chunks_mut(64).zip(colours.chunks(64)).enumerate() {
-            let bits = usable[j];
-            for (i, (s, c)) in s.iter_mut().zip(c).enumerate() {
-                let u = ((bits >> i) & 1) as f32;
-                *s = [c.x * u, c.y * u, c.z * u, u];
-            }
-        }
-        let out = &mut rows[(y - ya) * w..(y - ya + 1) * w];
-        for (x, o) in out.iter_mut().enumerate() {
-            let mut a = [0f32; 4];
-            if x >= 2 && x + 2 < w {
-                let v = &src[x - 2..x + 3];
-                for t in 0..5 {
-                    for ch in 0..4 {
-                        a[ch] += g[t] * v[t][ch];
-                    }
-                }
-            } else {
-                for (t, &gt) in g.iter().enumerate() {
-                    let xx = x as i64 + t as i64 - 2;
-                    if xx >= 0 && xx < w as i64 {
-                        for ch in 0..4 {
-                            a[ch] += gt * src[xx as usize][ch];
-                        }
-                    }
-                }
-            }
-            *o = a;
-        }
-    }
-}
-
-/// Window sums of the 64 pixels of word `j` of row `y` from the row-filtered rows (all of
-/// them: branch-free; the caller keeps those it wants).
-#[inline(always)]
-fn column_pass(input: &InterpInput, scratch: &[[f32; 4]], ya: usize, y: usize, j: usize, acc: &mut [[f32; 4]; 64]) {
-    let (w, h) = (input.flags.width, input.flags.height);
-    let x0 = 64 * j;
-    let n = (w - x0).min(64);
-    // Rows outside the image get weight 0 (and read the centre row, any row would do).
-    let mut g = [0f32; 5];
-    let rows: [&[[f32; 4]]; 5] = std::array::from_fn(|t| {
-        let yy = y as i64 + t as i64 - 2;
-        let inside = yy >= 0 && yy < h as i64;
-        g[t] = if inside { input.kernel.0[t * 5 + 2] } else { 0.0 };
-        let yy = if inside { yy as usize } else { y };
-        &scratch[(yy - ya) * w + x0..][..n]
-    });
-    for (i, a) in acc[..n].iter_mut().enumerate() {
-        let mut s = [0f32; 4];
-        for t in 0..5 {
-            let v = rows[t][i];
-            for ch in 0..4 {
-                s[ch] += g[t] * v[ch];
-            }
-        }
-        *a = s;
-    }
 }
 
 /// Calls `f(i)` for every set bit `i` of `bits`, lowest first (no branch per pixel: the
