@@ -269,16 +269,7 @@ async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
 
     // Switch to the Render Cache baseline: no EPI work, no classes.
     v.send(In::Settings(pb::Settings { reconstruction: pb::Reconstruction::RenderCache as i32, ..Default::default() })).await;
-    let mut switched = None;
-    for _ in 0..50 {
-        let (f, r) = v.frame(10).await;
-        assert!(r.is_empty(), "{r:?}");
-        if f.reconstruction == pb::Reconstruction::RenderCache as i32 {
-            switched = Some(f);
-            break;
-        }
-    }
-    let f = switched.expect("the mode switched");
+    let f = first_frame_made_with(&mut v, pb::Reconstruction::RenderCache).await;
     assert!(!stages(&f).iter().any(|s| s == "reach" || s == "edges"), "{:?}", stages(&f));
     assert_eq!(f.pixels.unwrap().simple_class, 0);
 
@@ -306,16 +297,7 @@ async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
         ..Default::default()
     }))
     .await;
-    let mut back = None;
-    for _ in 0..50 {
-        let (f, r) = v.frame(10).await;
-        assert!(r.is_empty(), "{r:?}");
-        if f.reconstruction == pb::Reconstruction::EdgeAndPoint as i32 {
-            back = Some(f);
-            break;
-        }
-    }
-    let f = back.expect("switched back");
+    let f = first_frame_made_with(&mut v, pb::Reconstruction::EdgeAndPoint).await;
     let names = stages(&f);
     assert!(names.iter().any(|s| s == "reach") && !names.iter().any(|s| s == "complex"), "{names:?}");
     assert!(names.iter().any(|s| s == "overlay"), "{names:?}");
@@ -323,4 +305,16 @@ async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
     let purple = edgepoint_server::image_metrics::linear_to_srgb8(edgepoint_server::epi::overlay::SIMPLE_PURPLE);
     let n = px.iter().filter(|c| **c == purple).count() as u32;
     assert_eq!(n, f.pixels.unwrap().simple_class, "one purple pixel per simple pixel");
+}
+
+/// The first frame reconstructed with `mode` within 50 frames; no rejections on the way.
+async fn first_frame_made_with(v: &mut common::Viewer, mode: pb::Reconstruction) -> pb::Frame {
+    for _ in 0..50 {
+        let (f, r) = v.frame(10).await;
+        assert!(r.is_empty(), "{r:?}");
+        if f.reconstruction == mode as i32 {
+            return f;
+        }
+    }
+    panic!("no frame made with {mode:?} within 50 frames");
 }

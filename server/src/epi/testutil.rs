@@ -117,3 +117,46 @@ pub fn random_epi(points: &PointImage, long: usize, short: usize, centre_lines: 
     epi.classify_with(sides, centres, points);
     epi
 }
+
+/// All monotone lattice paths from (0, 0) to (dx, dy), as offset lists (the "reasonably
+/// direct" paths of paper 000 §5.2).
+pub fn monotone_paths(dx: i64, dy: i64) -> Vec<Vec<(i64, i64)>> {
+    if dx == 0 && dy == 0 {
+        return vec![vec![(0, 0)]];
+    }
+    let mut out = Vec::new();
+    if dx != 0 {
+        for mut p in monotone_paths(dx - dx.signum(), dy) {
+            p.push((dx, dy));
+            out.push(p);
+        }
+    }
+    if dy != 0 {
+        for mut p in monotone_paths(dx, dy - dy.signum()) {
+            p.push((dx, dy));
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The pairs (region of cell a, region of cell b) that meet along the side the two cells
+/// share, cell b lying at `d` from cell a; `region_a` / `region_b` give the region (or
+/// `None` for a complex cell) of a point in each cell's unit square. Tested at `steps`
+/// points along the side, never exactly at a crossing ((p + 1/2) / 8 of the side).
+pub fn regions_meeting(region_a: impl Fn([f64; 2]) -> Option<usize>, region_b: impl Fn([f64; 2]) -> Option<usize>, d: (i64, i64), steps: usize) -> Vec<(usize, usize)> {
+    let mut out = std::collections::HashSet::new();
+    for k in 0..steps {
+        let t = (k as f64 + 0.37) / steps as f64;
+        let (pa, pb) = match d {
+            (1, 0) => ([1.0, t], [0.0, t]),
+            (-1, 0) => ([0.0, t], [1.0, t]),
+            (0, 1) => ([t, 1.0], [t, 0.0]),
+            _ => ([t, 0.0], [t, 1.0]),
+        };
+        if let (Some(x), Some(y)) = (region_a(pa), region_b(pb)) {
+            out.insert((x, y));
+        }
+    }
+    out.into_iter().collect()
+}

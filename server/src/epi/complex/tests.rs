@@ -2,7 +2,7 @@
 //! and reconstruction of a pixel where two edges cross.
 use super::*;
 use crate::epi::tables::orient;
-use crate::epi::testutil::{draw_segment, random_epi, random_points, Rng};
+use crate::epi::testutil::{draw_segment, monotone_paths, random_epi, random_points, regions_meeting, Rng};
 use crate::epi::Epi;
 use std::collections::{HashSet, VecDeque};
 
@@ -20,41 +20,7 @@ fn region(s: &Sub, r: [f64; 2]) -> Option<usize> {
 }
 
 fn meeting(a: &Sub, b: &Sub, d: (i64, i64)) -> Vec<(usize, usize)> {
-    let mut out = HashSet::new();
-    // Never exactly at a crossing ((p + 1/2) / 4 of the side).
-    for k in 0..100 {
-        let t = (k as f64 + 0.37) / 100.0;
-        let (ra, rb) = match d {
-            (1, 0) => ([1.0, t], [0.0, t]),
-            (-1, 0) => ([0.0, t], [1.0, t]),
-            (0, 1) => ([t, 1.0], [t, 0.0]),
-            _ => ([t, 0.0], [t, 1.0]),
-        };
-        if let (Some(x), Some(y)) = (region(a, ra), region(b, rb)) {
-            out.insert((x, y));
-        }
-    }
-    out.into_iter().collect()
-}
-
-fn paths(dx: i64, dy: i64) -> Vec<Vec<(i64, i64)>> {
-    if dx == 0 && dy == 0 {
-        return vec![vec![(0, 0)]];
-    }
-    let mut out = Vec::new();
-    if dx != 0 {
-        for mut p in paths(dx - dx.signum(), dy) {
-            p.push((dx, dy));
-            out.push(p);
-        }
-    }
-    if dy != 0 {
-        for mut p in paths(dx, dy - dy.signum()) {
-            p.push((dx, dy));
-            out.push(p);
-        }
-    }
-    out
+    regions_meeting(|r| region(a, r), |r| region(b, r), d, 100)
 }
 
 /// Whether region `from` of subpixel s reaches the primary region of t along some monotone
@@ -64,7 +30,7 @@ fn oracle(grid: &[Sub; 36], s: (i64, i64), t: (i64, i64), from: usize) -> bool {
     if at(s).c4 == CLASS_COMPLEX || at(t).c4 == CLASS_COMPLEX || (from == 1 && at(s).c4 == CLASS_EMPTY) {
         return false;
     }
-    for path in paths(t.0 - s.0, t.1 - s.1) {
+    for path in monotone_paths(t.0 - s.0, t.1 - s.1) {
         let cells: HashSet<(i64, i64)> = path.iter().map(|&(dx, dy)| (s.0 + dx, s.1 + dy)).collect();
         let mut seen = HashSet::from([(s, from)]);
         let mut queue = VecDeque::from([(s, from)]);

@@ -3,9 +3,10 @@
 use super::*;
 use crate::epi::code::{EpiPixel, PIXEL};
 use crate::epi::tables::orient;
-use crate::epi::testutil::{random_epi, random_points, Rng};
+use crate::epi::testutil::{monotone_paths, random_epi, random_points, regions_meeting, Rng};
 use crate::epi::Epi;
 use std::collections::{HashSet, VecDeque};
+
 
 /// Region (0 primary, 1 secondary) of cell point `r` in a pixel; `None` for complex pixels.
 fn region(p: EpiPixel, r: [f64; 2]) -> Option<usize> {
@@ -21,44 +22,9 @@ fn region(p: EpiPixel, r: [f64; 2]) -> Option<usize> {
 }
 
 /// Region pairs meeting along the shared side of 4-neighbours `a` and `b` (b at `d` from a),
-/// by testing points along the side with each pixel's own quantised edge.
+/// each pixel's region decided by its own quantised edge.
 fn meeting(pa: EpiPixel, pb: EpiPixel, d: (i64, i64)) -> Vec<(usize, usize)> {
-    let mut out = HashSet::new();
-    // Never exactly at a crossing ((p + 1/2) / 8 of the side).
-    for k in 0..200 {
-        let t = (k as f64 + 0.37) / 200.0;
-        let (ra, rb) = match d {
-            (1, 0) => ([1.0, t], [0.0, t]),
-            (-1, 0) => ([0.0, t], [1.0, t]),
-            (0, 1) => ([t, 1.0], [t, 0.0]),
-            _ => ([t, 0.0], [t, 1.0]),
-        };
-        if let (Some(x), Some(y)) = (region(pa, ra), region(pb, rb)) {
-            out.insert((x, y));
-        }
-    }
-    out.into_iter().collect()
-}
-
-/// All monotone lattice paths from (0, 0) to (dx, dy), as offset lists.
-fn monotone_paths(dx: i64, dy: i64) -> Vec<Vec<(i64, i64)>> {
-    if dx == 0 && dy == 0 {
-        return vec![vec![(0, 0)]];
-    }
-    let mut out = Vec::new();
-    if dx != 0 {
-        for mut p in monotone_paths(dx - dx.signum(), dy) {
-            p.push((dx, dy));
-            out.push(p);
-        }
-    }
-    if dy != 0 {
-        for mut p in monotone_paths(dx, dy - dy.signum()) {
-            p.push((dx, dy));
-            out.push(p);
-        }
-    }
-    out
+    regions_meeting(|r| region(pa, r), |r| region(pb, r), d, 200)
 }
 
 /// Whether the primary region of `c` reaches the primary region of `c + o` by flood fill
