@@ -41,6 +41,10 @@ pub struct EpiArgs {
     /// Shader parameter KEY=VALUE for shading the samples (repeatable).
     #[arg(long = "shader-param", value_parser = crate::frame::parse_param)]
     pub shader_params: Vec<(String, f64)>,
+    /// Filter every pixel's own sample with its neighbours instead of showing it (the
+    /// renderer shows it: same quality, less work).
+    #[arg(long)]
+    pub filter_own: bool,
     /// Skip the baselines (per-pixel reachability, Render Cache interpolation), e.g. to
     /// profile the EPI alone.
     #[arg(long)]
@@ -86,7 +90,11 @@ pub fn run(args: EpiArgs) -> Result<()> {
                 // One thread: that thread's CPU time, which other work on a busy machine does not
                 // inflate. All threads: wall-clock time.
                 let cpu = *threads == 1;
-                let run = pool.install(|| measure(&staged, &cam, &edges, &transforms, &samples, background, size, args.iterations, !args.no_baselines, cpu));
+                let options = InterpOptions {
+                    own_sample: if args.filter_own { edgepoint_server::epi::OwnSample::Filter } else { edgepoint_server::epi::OwnSample::Show },
+                    ..Default::default()
+                };
+                let run = pool.install(|| measure(&staged, &cam, &edges, &transforms, &samples, background, size, args.iterations, !args.no_baselines, cpu, &options));
                 let m = &run.median;
                 let target: f64 = TARGET_STAGES.iter().map(|s| m.get(*s).copied().unwrap_or(0.0)).sum();
                 writeln!(
@@ -170,12 +178,12 @@ fn measure(
     iterations: usize,
     baselines: bool,
     cpu: bool,
+    options: &InterpOptions,
 ) -> Run {
     let clock: fn() -> f64 = if cpu { thread_cpu_ms } else { wall_ms };
     let mut cache: RenderCache = cache_with(size, size, cam, samples, background);
     let mut epi = Epi::new(size, size);
     let mut per_pixel = ScalarReach::new(size as usize, size as usize);
-    let options = InterpOptions::default();
     let mut all: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let mut counts = *epi.counts();
     let mut scratch = Vec::new();
@@ -188,7 +196,7 @@ fn measure(
         cache.reproject_points(cam, &mut t);
         counts = epi.build(edges, cam, cache.point_image(), true, &mut t);
         let (points, image, weights) = cache.reconstruction_target();
-        epi.reconstruct(points, background, &options, true, image, weights, &mut t);
+        epi.reconstruct(points, background, options, true, image, weights, &mut t);
         if baselines {
             t.time("reach_per_pixel", || per_pixel.compute(epi.pixels()));
             let mut t_rc = StageTimes::with_clock(clock);
