@@ -127,6 +127,7 @@ pub fn run(args: EpiArgs) -> Result<()> {
                     "raster": { "fragments": run.fragments, "culled": run.culled },
                     "bytes_per_pixel": run.bytes,
                     "bytes_per_pixel_total": run.bytes_total_per_pixel,
+                    "content_sized_bytes_per_pixel": run.content,
                     "shared_with_render_cache_bytes_per_pixel": {
                         "point image (index, depth, position, colour, age)": 32,
                         "frame image (linear RGB f32)": 12,
@@ -138,7 +139,7 @@ pub fn run(args: EpiArgs) -> Result<()> {
     }
     writeln!(table, "  r+i+aa = reach + interpolate + antialias (target: <= 3 ms at 512x512 on one thread)")?;
     writeln!(table, "  reach/px = per-pixel table reachability (the paper's formulation), for comparison with the bit-sliced reach")?;
-    writeln!(table, "  B/px = bytes per pixel of the EPI's own structures (run with --json for the breakdown)")?;
+    writeln!(table, "  B/px = bytes per pixel of the EPI's image-sized structures (--json: the breakdown, and the content-sized ones)")?;
     crate::emit(args.json, &json!({ "scene": args.scene, "iterations": args.iterations, "runs": runs }), &table);
     Ok(())
 }
@@ -163,6 +164,8 @@ struct Run {
     fragments: u32,
     culled: u32,
     bytes: BTreeMap<String, f64>,
+    /// Content-sized structures, in bytes per pixel of this frame.
+    content: BTreeMap<String, f64>,
     bytes_total_per_pixel: f64,
 }
 
@@ -211,9 +214,11 @@ fn measure(
     }
     let median = all.iter().map(|(k, v)| (k.clone(), median(v))).collect();
     let pixels = (size as f64) * (size as f64);
-    let mut bytes: BTreeMap<String, f64> = epi.memory().into_iter().map(|(k, b)| (k.to_string(), b as f64 / pixels)).collect();
-    bytes.insert("per-pixel reachability masks (baseline, not used)".into(), per_pixel.bytes() as f64 / pixels);
-    let bytes_total_per_pixel = epi.memory().iter().map(|m| m.1 as f64).sum::<f64>() / pixels;
+    let to_per_pixel = |list: Vec<(&'static str, usize)>| -> BTreeMap<String, f64> { list.into_iter().map(|(k, b)| (k.to_string(), b as f64 / pixels)).collect() };
+    let mut bytes = to_per_pixel(epi.memory());
+    let bytes_total_per_pixel = bytes.values().sum::<f64>();
+    let content = to_per_pixel(epi.memory_content());
+    bytes.insert("per-pixel reachability masks (the per-pixel baseline, not used)".into(), per_pixel.bytes() as f64 / pixels);
     Run {
         median,
         classes: json!({ "empty": counts.empty, "simple": counts.simple, "complex": counts.complex,
@@ -221,6 +226,7 @@ fn measure(
         fragments: counts.raster.fragments,
         culled: counts.raster.culled,
         bytes,
+        content,
         bytes_total_per_pixel,
     }
 }

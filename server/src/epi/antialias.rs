@@ -44,9 +44,14 @@ fn row_chunks<'a>(buf: &'a mut [Vec3], rank: &[u32], words: usize, h: usize) -> 
 }
 
 impl SimpleColours {
-    /// Bytes held: one rank per 64 pixels, plus 24 bytes per simple pixel of the frame.
-    pub fn bytes(&self) -> usize {
-        self.rank.capacity() * 4 + (self.primary.capacity() + self.mixed.capacity()) * 12
+    /// Bytes of the ranks: 4 per 64 pixels.
+    pub fn rank_bytes(&self) -> usize {
+        self.rank.capacity() * 4
+    }
+
+    /// Bytes of the colours: 24 per simple pixel (of the frame with the most).
+    pub fn colour_bytes(&self) -> usize {
+        (self.primary.capacity() + self.mixed.capacity()) * 12
     }
 
     /// Ranks the simple pixels and copies their primary colours out of `image`.

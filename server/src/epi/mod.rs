@@ -16,7 +16,15 @@
 //!
 //! [`Epi`] owns every per-pixel buffer, allocated once for its image size, and times the
 //! stages under the names of paper Table 2. The edges come in as `&[EdgeSegment]`, from
-//! whichever finder produced them. No networking.
+//! whichever finder produced them. Pixels left without any sample in reach are marked
+//! ([`Epi::holes`]) for the frame's hole fill ([`crate::render_cache::holes`]). No
+//! networking.
+//!
+//! Per-pixel memory (bytes per pixel, see [`Epi::memory`] and the bench `epi`): boundary
+//! masks 2 (+2 with the complex filter's centre lines), conservative depth 4, EPI pixel 2
+//! (edge code, sample region, flags), flag planes 0.5, interpolated and hole planes 0.25,
+//! neighbour masks 1, reachability 1.5; plus 24 bytes per simple pixel for anti-aliasing and
+//! the spreading queues, which scale with the edges and the unreached pixels.
 pub mod antialias;
 pub mod code;
 pub mod complex;
@@ -307,7 +315,8 @@ impl Epi {
         &self.reach
     }
 
-    /// Bytes per structure, structure by structure (per-pixel ones and the rest).
+    /// Bytes of the structures sized by the image, structure by structure (what paper §7.4
+    /// counts per pixel).
     pub fn memory(&self) -> Vec<(&'static str, usize)> {
         vec![
             ("boundary masks (sides)", 2 * self.bounds.sides.len()),
@@ -319,9 +328,19 @@ impl Epi {
             ("hole plane", 8 * self.holes.len()),
             ("neighbour masks", self.neighbours.bytes()),
             ("reachability masks", self.reach.bytes()),
-            ("simple-pixel colours (anti-aliasing)", self.simple.bytes()),
-            ("spreading queues", self.spread.bytes()),
-            ("rasterizer segments and bins", self.raster.bytes()),
+            ("simple-pixel ranks (anti-aliasing)", self.simple.rank_bytes()),
+        ]
+    }
+
+    /// Bytes of the structures sized by the frame's content, held at their largest so far:
+    /// the rasterizer's projected segments and bins (per on-screen edge), the anti-aliasing
+    /// colours (24 per simple pixel), the spreading queues (per pixel that reached no
+    /// sample).
+    pub fn memory_content(&self) -> Vec<(&'static str, usize)> {
+        vec![
+            ("rasterizer segments and bins (per edge)", self.raster.bytes()),
+            ("simple-pixel colours (per simple pixel)", self.simple.colour_bytes()),
+            ("spreading queues (per unreached pixel)", self.spread.bytes()),
         ]
     }
 }

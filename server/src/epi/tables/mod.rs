@@ -305,7 +305,7 @@ pub fn neighbour_table(cell: Cell, d: usize) -> [u8; 256] {
             }
             let (ea, eb) = (representative(cell, ca, sa), representative(cell, cb, sb));
             let mut m = 0u8;
-            // Points along the shared side; the shared crossing (at (SHARED_POS + 0.5) / 8)
+            // Points along the shared side; the shared crossing (at (SHARED_POS + 1/2) / 8 of it)
             // is never one of them.
             const STEPS: u32 = 64;
             for k in 0..STEPS {
