@@ -65,6 +65,8 @@ pub struct FrameArgs {
     /// Frame-rate cap of the server's frame loop (server default 30).
     #[arg(long)]
     pub max_fps: Option<f64>,
+    #[command(flatten)]
+    pub reconstruction: edgepoint_viewer::ReconstructionArgs,
     /// Skip the reference renders (no PSNR, no speedup).
     #[arg(long)]
     pub no_reference: bool,
@@ -88,7 +90,7 @@ pub struct ReferenceArgs {
     pub json: bool,
 }
 
-fn parse_param(s: &str) -> Result<(String, f64), String> {
+pub fn parse_param(s: &str) -> Result<(String, f64), String> {
     let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
     let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
     Ok((k.trim().to_string(), v))
@@ -144,14 +146,7 @@ async fn references(
     Ok(References { converged, converged_cached, one_spp })
 }
 
-fn write_png(path: &std::path::Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
-    let mut bytes = Vec::with_capacity(linear.len() * 3);
-    for c in linear {
-        bytes.extend_from_slice(&edgepoint_server::image_metrics::linear_to_srgb8(*c));
-    }
-    image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgb8)
-        .with_context(|| format!("writing {}", path.display()))
-}
+use crate::inprocess::write_png;
 
 pub fn run(args: FrameArgs) -> Result<()> {
     let a = &args.scene;
@@ -169,10 +164,14 @@ pub fn run(args: FrameArgs) -> Result<()> {
             shader: a.shader.clone(),
             shader_params: a.shader_params.iter().cloned().collect(),
             encoding: pb::FrameEncoding::Qoi as i32,
-            settings: Some(pb::Settings {
-                sparseness: args.sparseness.unwrap_or(0.0),
-                max_fps: args.max_fps.unwrap_or(0.0),
-                ..Default::default()
+            settings: Some({
+                let mut s = pb::Settings {
+                    sparseness: args.sparseness.unwrap_or(0.0),
+                    max_fps: args.max_fps.unwrap_or(0.0),
+                    ..Default::default()
+                };
+                args.reconstruction.apply(&mut s);
+                s
             }),
             camera: None,
         };
@@ -240,6 +239,16 @@ pub fn run(args: FrameArgs) -> Result<()> {
             "sparseness_ratio": if mean_samples > 0.0 { pixels / mean_samples } else { f64::INFINITY },
             "frames_dropped": dropped,
             "last_frame_sequence": last.sequence,
+            "reconstruction": edgepoint_viewer::reconstruction::reconstruction_name(last.reconstruction),
+            // Paper Table 3 for the last frame.
+            "pixel_classes": last.pixels.as_ref().map(|p| json!({
+                "empty": p.empty_class, "simple": p.simple_class, "complex": p.complex_class,
+            })),
+            "edges": last.edges.as_ref().map(|e| json!({
+                "silhouette": e.silhouette, "sharp": e.sharp, "boundary": e.boundary,
+                "shadow_hard": e.shadow_hard, "shadow_umbral": e.shadow_umbral, "shadow_penumbral": e.shadow_penumbral,
+                "fragments": e.fragments, "culled": e.culled,
+            })),
         });
         if let Some(dir) = &args.out {
             std::fs::create_dir_all(dir)?;
@@ -272,6 +281,15 @@ pub fn run(args: FrameArgs) -> Result<()> {
         }
         writeln!(table, "  {:<14} {:>8.2} ms (median) -> pipeline {:.1} fps", "total", median_total, out["pipeline_fps"].as_f64().unwrap_or(0.0))?;
         writeln!(table, "  delivered fps  {fps:.1}; samples/frame {mean_samples:.0}; sparseness ratio {:.1}", out["sparseness_ratio"].as_f64().unwrap_or(0.0))?;
+        if let (Some(p), Some(e)) = (&last.pixels, &last.edges) {
+            writeln!(
+                table,
+                "  {} reconstruction; pixels empty/simple/complex {}/{}/{}; edges: {} silhouette, {} sharp, {} boundary, {} shadow",
+                out["reconstruction"].as_str().unwrap_or("?"),
+                p.empty_class, p.simple_class, p.complex_class,
+                e.silhouette, e.sharp, e.boundary, e.shadow_hard + e.shadow_umbral + e.shadow_penumbral,
+            )?;
+        }
         if let Some(p) = out.get("psnr_last_frame_db") {
             writeln!(
                 table,

@@ -15,9 +15,16 @@
 //!   killed/restarted and stopped/continued mid-session (longest frame gaps, rejoin time).
 //! - `load`: scene load (parse + weld + adjacency) and BVH build times.
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
+//! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
+//!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
+//! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
+//!   interpolation from the same samples, at several sample densities.
+mod epi;
 mod frame;
+mod inprocess;
 mod load;
 mod loadtest;
+mod quality;
 mod rays;
 mod reference_cache;
 mod stats;
@@ -44,6 +51,10 @@ enum Cmd {
     Load(load::LoadArgs),
     /// Render the 1-spp and converged reference images of a scene through local workers.
     Reference(frame::ReferenceArgs),
+    /// Edge-and-point image stage times (1 thread / all threads) and bytes per pixel.
+    Epi(epi::EpiArgs),
+    /// PSNR/SSIM of edge-and-point vs Render Cache reconstruction from the same samples.
+    Quality(quality::QualityArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -60,6 +71,8 @@ fn main() -> anyhow::Result<()> {
         Cmd::Loadtest(a) => loadtest::run(a),
         Cmd::Load(a) => load::run(a),
         Cmd::Reference(a) => frame::run_reference(a),
+        Cmd::Epi(a) => epi::run(a),
+        Cmd::Quality(a) => quality::run(a),
     }
 }
 

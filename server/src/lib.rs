@@ -2,6 +2,9 @@
 //!
 //! - [`cli`] — the `edgepoint-server` command line (shared with the deploy tests).
 //! - [`edges`] — paper 000 §6: discontinuity edges (brute-force finder; the oracle).
+//! - [`epi`] — paper 000 §4–§5: the edge-and-point image (edge rasterization, pixel
+//!   classification, reachability, edge-respecting interpolation, anti-aliasing, complex
+//!   filter) (no networking).
 //! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
 //!   occlusion culling, gap-filling interpolation (no networking).
 //! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
@@ -19,6 +22,7 @@
 pub mod cli;
 pub mod edges;
 pub mod encode;
+pub mod epi;
 pub mod image_metrics;
 pub mod metrics;
 pub mod reference;

@@ -250,3 +250,78 @@ async fn frames_continue_when_a_worker_disappears() {
     assert!(samples_after > 500, "samples keep arriving after the worker died ({samples_after})");
     drop(b);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 4).await;
+    let (width, height) = (96u32, 96u32);
+    let mut v = open(&addr, start_msg(cornell(), width, height)).await.unwrap();
+    v.started().await;
+    let stages = |f: &pb::Frame| f.stages.iter().map(|s| s.stage.clone()).collect::<Vec<_>>();
+
+    // Edge-and-point reconstruction by default: edges found and rasterized, pixels classified.
+    let f = v.frame_with_samples(20).await;
+    assert_eq!(f.reconstruction, pb::Reconstruction::EdgeAndPoint as i32);
+    let p = f.pixels.unwrap();
+    assert_eq!(p.empty_class + p.simple_class + p.complex_class, width * height);
+    assert!(p.simple_class > 0 && p.complex_class > 0, "{p:?}");
+    assert_eq!(p.with_point + p.filled + p.empty, width * height);
+    let e = f.edges.unwrap();
+    assert!(e.silhouette + e.sharp + e.boundary > 0 && e.fragments > 0, "{e:?}");
+    let names = stages(&f);
+    for s in ["input", "samples", "edges", "reproject", "rasterize", "reach", "interpolate", "antialias", "complex", "sampling", "requests", "encode"] {
+        assert!(names.iter().any(|n| n == s), "stage {s} missing from {names:?}");
+    }
+
+    // Switch to the Render Cache baseline: no EPI work, no classes.
+    v.send(In::Settings(pb::Settings { reconstruction: pb::Reconstruction::RenderCache as i32, ..Default::default() })).await;
+    let f = first_frame_made_with(&mut v, pb::Reconstruction::RenderCache).await;
+    assert!(!stages(&f).iter().any(|s| s == "reach" || s == "edges"), "{:?}", stages(&f));
+    assert_eq!(f.pixels.unwrap().simple_class, 0);
+
+    // Bad reconstruction settings are rejected; the session and its mode go on.
+    v.send(In::Settings(pb::Settings { reconstruction: 9, ..Default::default() })).await;
+    v.send(In::Settings(pb::Settings { sharp_cutoff_degrees: 500.0, ..Default::default() })).await;
+    v.send(In::Settings(pb::Settings { overlay: 42, ..Default::default() })).await;
+    let mut rejected = Vec::new();
+    while rejected.len() < 3 {
+        let (f, r) = v.frame(10).await;
+        assert_eq!(f.reconstruction, pb::Reconstruction::RenderCache as i32);
+        rejected.extend(r);
+    }
+    assert!(rejected.iter().all(|r| r.code == tonic::Code::InvalidArgument as i32));
+    assert!(rejected[0].message.contains("reconstruction"), "{}", rejected[0].message);
+    assert!(rejected[1].message.contains("sharp_cutoff"), "{}", rejected[1].message);
+    assert!(rejected[2].message.contains("overlay"), "{}", rejected[2].message);
+
+    // Back to edge-and-point without the complex filter, with the class overlay: the frame
+    // shows simple pixels in the overlay's purple.
+    v.send(In::Settings(pb::Settings {
+        reconstruction: pb::Reconstruction::EdgeAndPoint as i32,
+        complex_filter: Some(false),
+        overlay: pb::Overlay::Classes as i32,
+        ..Default::default()
+    }))
+    .await;
+    let f = first_frame_made_with(&mut v, pb::Reconstruction::EdgeAndPoint).await;
+    let names = stages(&f);
+    assert!(names.iter().any(|s| s == "reach") && !names.iter().any(|s| s == "complex"), "{names:?}");
+    assert!(names.iter().any(|s| s == "overlay"), "{names:?}");
+    let px = decode_frame(&f.data, pb::FrameEncoding::Qoi, width, height).unwrap();
+    let purple = edgepoint_server::image_metrics::linear_to_srgb8(edgepoint_server::epi::overlay::SIMPLE_PURPLE);
+    let n = px.iter().filter(|c| **c == purple).count() as u32;
+    assert_eq!(n, f.pixels.unwrap().simple_class, "one purple pixel per simple pixel");
+}
+
+/// The first frame reconstructed with `mode` within 50 frames; no rejections on the way.
+async fn first_frame_made_with(v: &mut common::Viewer, mode: pb::Reconstruction) -> pb::Frame {
+    for _ in 0..50 {
+        let (f, r) = v.frame(10).await;
+        assert!(r.is_empty(), "{r:?}");
+        if f.reconstruction == mode as i32 {
+            return f;
+        }
+    }
+    panic!("no frame made with {mode:?} within 50 frames");
+}

@@ -42,6 +42,10 @@ pub struct FrameStats {
     pub samples_requested: u32,
     pub outstanding: u32,
     pub pixels: PixelStats,
+    /// Discontinuity edges per kind and their rasterization (paper Table 3).
+    pub edges: EdgeStats,
+    /// How the frame was reconstructed: `epr` or `render-cache`.
+    pub reconstruction: &'static str,
     pub epoch: u64,
     pub live_workers: u32,
     pub frames_dropped: u64,
@@ -96,6 +100,34 @@ impl From<&pb::PixelCounts> for PixelStats {
             empty_class: p.empty_class,
             simple_class: p.simple_class,
             complex_class: p.complex_class,
+        }
+    }
+}
+
+/// The server's edge counts.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct EdgeStats {
+    pub silhouette: u32,
+    pub sharp: u32,
+    pub boundary: u32,
+    pub shadow_hard: u32,
+    pub shadow_umbral: u32,
+    pub shadow_penumbral: u32,
+    pub fragments: u32,
+    pub culled: u32,
+}
+
+impl From<&pb::EdgeCounts> for EdgeStats {
+    fn from(e: &pb::EdgeCounts) -> Self {
+        EdgeStats {
+            silhouette: e.silhouette,
+            sharp: e.sharp,
+            boundary: e.boundary,
+            shadow_hard: e.shadow_hard,
+            shadow_umbral: e.shadow_umbral,
+            shadow_penumbral: e.shadow_penumbral,
+            fragments: e.fragments,
+            culled: e.culled,
         }
     }
 }
@@ -182,6 +214,8 @@ impl FrameStats {
             samples_requested: f.samples_requested,
             outstanding: f.outstanding,
             pixels: f.pixels.as_ref().map(PixelStats::from).unwrap_or_default(),
+            edges: f.edges.as_ref().map(EdgeStats::from).unwrap_or_default(),
+            reconstruction: crate::reconstruction::reconstruction_name(f.reconstruction),
             epoch: f.epoch,
             live_workers: f.live_workers,
             frames_dropped: f.frames_dropped,
@@ -293,6 +327,8 @@ mod tests {
             samples_used: 40,
             samples_requested: 64,
             pixels: Some(pb::PixelCounts { with_point: 5, simple_class: 7, ..Default::default() }),
+            edges: Some(pb::EdgeCounts { silhouette: 11, culled: 3, ..Default::default() }),
+            reconstruction: pb::Reconstruction::EdgeAndPoint as i32,
             live_workers: 2,
             ..Default::default()
         }
@@ -325,6 +361,8 @@ mod tests {
         assert_eq!(v["encoding"], "qoi");
         assert_eq!(v["samples_requested"], 64);
         assert_eq!(v["pixels"]["simple_class"], 7);
+        assert_eq!((v["edges"]["silhouette"].as_u64(), v["edges"]["culled"].as_u64()), (Some(11), Some(3)));
+        assert_eq!(v["reconstruction"], "epr");
         assert_eq!(v["live_workers"], 2);
         assert!((v["interval_ms"].as_f64().unwrap() - 50.0).abs() < 1e-6);
     }

@@ -7,16 +7,19 @@
 //! - [`client`]: one `Renderer.Session` stream as a typed client.
 //! - [`frame`]: decoding frames (raw / QOI / PNG / JPEG) into RGB images.
 //! - [`headless`]: PNG per frame plus one JSON line of stats per frame.
+//! - [`reconstruction`]: the reconstruction switches (edge-and-point vs baseline, overlays).
 //! - [`script`]: scripted camera orbit and object slide; the camera rig keys drive.
 //! - [`window`]: an on-screen window (minifb) when a display exists.
 pub mod client;
 pub mod frame;
 pub mod headless;
 pub mod local;
+pub mod reconstruction;
 pub mod script;
 pub mod window;
 
 pub use client::{scene_source_from_arg, ClientError, ConnectOptions, Event, SessionClient, SessionSender};
 pub use headless::{FrameStats, HeadlessWriter};
 pub use local::{find_binary, LocalCluster, LocalOptions};
+pub use reconstruction::ReconstructionArgs;
 pub use script::{CameraRig, ObjectSlide, Script};

@@ -10,7 +10,7 @@ use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use edgepoint_viewer::script::{Script, ScriptStep};
 use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
-use edgepoint_viewer::{scene_source_from_arg, ConnectOptions, Event, SessionClient};
+use edgepoint_viewer::{scene_source_from_arg, ConnectOptions, Event, ReconstructionArgs, SessionClient};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -147,6 +147,9 @@ struct Args {
     #[arg(long, value_name = "FPS", allow_negative_numbers = true, value_parser = parse_positive_f64)]
     max_fps: Option<f64>,
 
+    #[command(flatten)]
+    reconstruction: ReconstructionArgs,
+
     /// Do not print the per-frame stats lines on stdout (stats.jsonl is still written).
     #[arg(long)]
     quiet: bool,
@@ -274,10 +277,10 @@ fn run(args: Args) -> Result<()> {
         (None, None) => unreachable!("a cluster is started whenever --server is absent"),
     };
 
-    let settings = (args.sparseness.is_some() || args.max_fps.is_some()).then(|| pb::Settings {
-        sparseness: args.sparseness.unwrap_or(0.0),
-        max_fps: args.max_fps.unwrap_or(0.0),
-        ..Default::default()
+    let settings = (args.sparseness.is_some() || args.max_fps.is_some() || args.reconstruction.is_set()).then(|| {
+        let mut s = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
+        args.reconstruction.apply(&mut s);
+        s
     });
     let start = pb::Start {
         scene: Some(scene),

@@ -17,6 +17,7 @@
 //!
 //! No networking here; all per-frame buffers are allocated once in [`RenderCache::new`].
 
+pub mod holes;
 mod interpolate;
 mod reproject;
 
@@ -140,7 +141,8 @@ pub struct CachedPoint {
     pub age: f32,
 }
 
-pub(crate) const NO_POINT: u32 = u32::MAX;
+/// [`PointImage::point`] of a pixel without a point.
+pub const NO_POINT: u32 = u32::MAX;
 /// Empty entry of the depth buffer: larger than any (depth bits, index) key.
 pub(crate) const EMPTY_KEY: u64 = u64::MAX;
 
@@ -489,14 +491,39 @@ impl RenderCache {
         cam: &edgepoint_scene::camera::CameraFrame,
         times: &mut crate::stage_times::StageTimes,
     ) -> FrameCounts {
+        let occluded = self.reproject_points(cam, times);
+        let (with_point, filled, empty) = self.interpolate_gaps(times);
+        FrameCounts { with_point, filled, empty, occluded, cache_points: self.valid as u32 }
+    }
+
+    /// The first half of [`Self::reproject_and_interpolate`]: ages the points and builds the
+    /// point image ([`STAGE_REPROJECT`]). Returns the number of points culled as occluded.
+    /// Another reconstruction (the edge-and-point image) can then fill the frame through
+    /// [`Self::reconstruction_target`].
+    pub fn reproject_points(&mut self, cam: &edgepoint_scene::camera::CameraFrame, times: &mut crate::stage_times::StageTimes) -> u32 {
         let mut cam = *cam;
         cam.width = self.cfg.width;
         cam.height = self.cfg.height;
         cam.aspect = self.cfg.width as f32 / self.cfg.height.max(1) as f32;
         self.frame = self.frame.wrapping_add(1);
-        let occluded = times.time(STAGE_REPROJECT, || self.reproject(&cam));
-        let (with_point, filled, empty) = times.time(STAGE_INTERPOLATE, || self.interpolate());
-        FrameCounts { with_point, filled, empty, occluded, cache_points: self.valid as u32 }
+        times.time(STAGE_REPROJECT, || self.reproject(&cam))
+    }
+
+    /// The Render Cache's own gap-filling interpolation of the last reprojection
+    /// ([`STAGE_INTERPOLATE`]): returns (pixels with a point, filled, empty).
+    pub fn interpolate_gaps(&mut self, times: &mut crate::stage_times::StageTimes) -> (u32, u32, u32) {
+        times.time(STAGE_INTERPOLATE, || self.interpolate())
+    }
+
+    /// The last point image with the frame buffers another reconstruction writes into: the
+    /// image ([`Self::image`]) and the un-normalised filter weights ([`Self::filter_weights`]).
+    pub fn reconstruction_target(&mut self) -> (&PointImage, &mut [Vec3], &mut [f32]) {
+        (&self.points, &mut self.image, &mut self.weights)
+    }
+
+    /// The background colour (pixels no sample reaches).
+    pub fn background(&self) -> Vec3 {
+        self.cfg.background
     }
 
     /// The filled frame: linear RGB, row-major, `width * height`.

@@ -5,14 +5,22 @@
 //!
 //! Per frame: apply input (camera, object moves bumping the scene epoch, settings) → insert
 //! the samples that arrived (dropping samples of objects that moved after the sample's
-//! epoch) → Render Cache reprojection and interpolation (§4.3) → prioritized sampling of the
-//! frame's budget (§5.3) → ray requests → encode and publish → sleep to the fps cap.
+//! epoch) → discontinuity edges for the current camera and object transforms (§6; the
+//! brute-force finder for now) → Render Cache reprojection (§4.3) → the edge-and-point image
+//! and its reconstruction (§4–5), or the Render Cache's own interpolation when the session
+//! asks for the baseline → prioritized sampling of the frame's budget from the
+//! reconstruction's filter weights (§5.3) → ray requests → overlay, encode and publish →
+//! sleep to the fps cap.
 use super::feedback::ShadingFeedback;
 use super::output::SessionOutput;
 use super::requests::{build_batches, splitmix64, BatchSpec, RequestRing};
-use super::settings::{camera_from_wire, resolve_move, SessionSettings};
+use super::settings::{camera_from_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
+use crate::edges::{brute::scene_edges, EdgeSegment};
 use crate::encode::{effective_encoding, encode_frame};
+use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
+use crate::epi::spread::BaselineHoles;
+use crate::render_cache::holes::HoleFill;
 use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
@@ -42,6 +50,8 @@ pub fn max_outstanding(per_frame: usize, rate: f64) -> usize {
     }
     ((rate * TARGET_SAMPLE_LATENCY.as_secs_f64()) as usize).clamp(per_frame, most)
 }
+/// Stage name of hole filling (not a column of paper Table 2).
+pub const STAGE_HOLES: &str = "holes";
 /// How often a waiting loop checks whether the viewer is gone.
 const POLL: Duration = Duration::from_millis(50);
 
@@ -77,7 +87,14 @@ pub(super) struct FrameLoop {
     /// Per object: the epoch of its latest move (0 = never moved).
     moved_at: Vec<u64>,
     last_move_epoch: u64,
+    /// Per object: its current object-to-world transform (for edge finding).
+    transforms: Vec<glam::Affine3A>,
     cache: RenderCache,
+    epi: Epi,
+    /// The frame's discontinuity segments.
+    edges: Vec<EdgeSegment>,
+    holes: HoleFill,
+    baseline_holes: BaselineHoles,
     sampler: Sampler,
     dispatcher: Dispatcher,
     ring: RequestRing,
@@ -122,7 +139,12 @@ impl FrameLoop {
             epoch: 0,
             moved_at: vec![0; objects],
             last_move_epoch: 0,
+            transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             cache,
+            epi: Epi::new(p.width, p.height),
+            edges: Vec::new(),
+            holes: HoleFill::new(p.width, p.height),
+            baseline_holes: BaselineHoles::default(),
             sampler: Sampler::new(p.width, p.height, p.seed),
             dispatcher,
             ring,
@@ -170,8 +192,7 @@ impl FrameLoop {
         let samples_used = self.insert_samples();
         self.times.add("samples", ms_since(t));
 
-        let counts = self.cache.reproject_and_interpolate(&self.cam_frame, &mut self.times);
-
+        let (counts, epi_counts) = self.reconstruct();
         let t = Instant::now();
         let pixels = self.width as usize * self.height as usize;
         let per_frame = self.settings.frame_budget(pixels);
@@ -190,6 +211,13 @@ impl FrameLoop {
         let samples_requested = self.send_requests();
         self.times.add("requests", ms_since(t));
 
+        if epi_counts.is_some() && self.settings.overlay != Overlay::None {
+            let t = Instant::now();
+            let (_, image, _) = self.cache.reconstruction_target();
+            self.epi.draw_overlay(self.settings.overlay, image);
+            self.times.add("overlay", ms_since(t));
+        }
+
         let t = Instant::now();
         let data = match encode_frame(self.cache.image(), self.width, self.height, self.encoding) {
             Ok(d) => d,
@@ -199,10 +227,54 @@ impl FrameLoop {
             }
         };
         self.times.add("encode", ms_since(t));
-        self.publish(t0, data, counts, samples_used, samples_requested);
+        self.publish(t0, data, counts, epi_counts, samples_used, samples_requested);
     }
 
-    fn publish(&mut self, t0: Instant, data: Vec<u8>, counts: FrameCounts, samples_used: u32, samples_requested: u32) {
+    /// Edges, reprojection and the frame's reconstruction (edge-and-point, or the Render
+    /// Cache baseline) into the cache's image and filter weights. The EPI is built in
+    /// baseline mode too when an overlay shows it.
+    fn reconstruct(&mut self) -> (FrameCounts, Option<EpiCounts>) {
+        let s = self.settings;
+        let epr = s.reconstruction == Reconstruction::EdgeAndPoint;
+        let build = epr || s.overlay != Overlay::None;
+        if build {
+            let t = Instant::now();
+            self.edges.clear();
+            scene_edges(&self.scene, &self.transforms, self.cam_frame.eye, s.sharp_cutoff_degrees, &mut self.edges);
+            self.times.add(STAGE_EDGES, ms_since(t));
+        }
+        let occluded = self.cache.reproject_points(&self.cam_frame, &mut self.times);
+        let epi_counts = build.then(|| {
+            let centre_lines = epr && s.complex_filter;
+            self.epi.build(&self.edges, &self.cam_frame, self.cache.point_image(), centre_lines, &mut self.times)
+        });
+        let cache_points = self.cache.len() as u32;
+        let counts = if epr {
+            let background = self.cache.background();
+            let (points, image, weights) = self.cache.reconstruction_target();
+            let r = self.epi.reconstruct(points, background, &InterpOptions::default(), s.complex_filter, image, weights, &mut self.times);
+            let i = r.interp;
+            FrameCounts { with_point: i.with_point, filled: i.filled, empty: i.empty, occluded, cache_points }
+        } else {
+            let (with_point, filled, empty) = self.cache.interpolate_gaps(&mut self.times);
+            FrameCounts { with_point, filled, empty, occluded, cache_points }
+        };
+        // Pixels no sample reached (edge-and-point reconstruction has spread colour into
+        // those its regions connect to): the pyramid fill, after an edge-blind spread for
+        // the baseline.
+        let t = Instant::now();
+        let (points, image, weights) = self.cache.reconstruction_target();
+        if epr {
+            self.holes.fill(points, self.epi.holes(), image);
+        } else {
+            self.baseline_holes.fill(points, weights, image, &mut self.holes);
+        }
+        self.times.add(STAGE_HOLES, ms_since(t));
+        (counts, epi_counts)
+    }
+
+    fn publish(&mut self, t0: Instant, data: Vec<u8>, counts: FrameCounts, epi: Option<EpiCounts>, samples_used: u32, samples_requested: u32) {
+        let epi = epi.unwrap_or_default();
         self.sequence += 1;
         self.counters.frames += 1;
         let frame = pb::Frame {
@@ -222,12 +294,25 @@ impl FrameLoop {
                 empty: counts.empty,
                 occluded: counts.occluded,
                 cache_points: counts.cache_points,
-                ..Default::default()
+                empty_class: epi.empty,
+                simple_class: epi.simple,
+                complex_class: epi.complex,
             }),
             epoch: self.epoch,
             live_workers: self.dispatcher.live_workers() as u32,
             frames_dropped: self.out.frames_dropped(),
             sim_time: self.start.elapsed().as_secs_f64(),
+            edges: Some(pb::EdgeCounts {
+                silhouette: epi.edges[0],
+                sharp: epi.edges[1],
+                boundary: epi.edges[2],
+                shadow_hard: epi.edges[3],
+                shadow_umbral: epi.edges[4],
+                shadow_penumbral: epi.edges[5],
+                fragments: epi.raster.fragments,
+                culled: epi.raster.culled,
+            }),
+            reconstruction: self.settings.reconstruction.to_wire() as i32,
         };
         self.out.publish_frame(frame);
     }
@@ -283,6 +368,7 @@ impl FrameLoop {
             tracing::error!(epoch = self.epoch, "dispatcher refused a new epoch");
         }
         self.moved_at[id as usize] = self.epoch;
+        self.transforms[id as usize] = t;
         self.last_move_epoch = self.epoch;
         self.cache.invalidate_objects(&[id]);
         // Shadows and reflections on other objects may have changed too: age everything so

@@ -22,8 +22,8 @@ pub use frame_loop::{max_outstanding, SessionCounters, OUTSTANDING_FRAMES, TARGE
 pub use output::{SessionOutput, MAX_QUEUED_REJECTIONS};
 pub use requests::{build_batches, splitmix64, BatchSpec, RequestInfo, RequestRing};
 pub use settings::{
-    camera_from_wire, camera_to_wire, resolve_move, SessionSettings, BATCH_SIZE_RANGE, MAX_AGE_RANGE, MAX_FPS_RANGE,
-    SPARSENESS_RANGE,
+    camera_from_wire, camera_to_wire, resolve_move, Reconstruction, SessionSettings, BATCH_SIZE_RANGE, MAX_AGE_RANGE,
+    MAX_FPS_RANGE, SHARP_CUTOFF_RANGE, SPARSENESS_RANGE,
 };
 
 use crate::workers::Dispatcher;

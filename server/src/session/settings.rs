@@ -1,9 +1,28 @@
 //! Session settings and the validation of viewer input (camera, object moves, settings).
 //! Anything out of range is refused with a message naming the field and the allowed range;
 //! nothing the viewer sends can panic the session.
+use crate::epi::Overlay;
 use edgepoint_proto as pb;
 use edgepoint_scene::Camera;
 use glam::Affine3A;
+
+/// How frames are reconstructed from the cached points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reconstruction {
+    /// The edge-and-point image (paper 000 §4–5).
+    EdgeAndPoint,
+    /// The baseline: the Render Cache's gap-filling interpolation, edges ignored.
+    RenderCache,
+}
+
+impl Reconstruction {
+    pub fn to_wire(self) -> pb::Reconstruction {
+        match self {
+            Reconstruction::EdgeAndPoint => pb::Reconstruction::EdgeAndPoint,
+            Reconstruction::RenderCache => pb::Reconstruction::RenderCache,
+        }
+    }
+}
 
 /// The settings in force in a session (paper 000 §7.2: sparseness 40–125 in the paper).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -17,11 +36,27 @@ pub struct SessionSettings {
     /// Age (frames) at which a sample's priority saturates.
     pub max_age_frames: f64,
     pub paused: bool,
+    pub reconstruction: Reconstruction,
+    /// Refine complex pixels with the subpixel filter (paper §5.4).
+    pub complex_filter: bool,
+    pub overlay: Overlay,
+    /// Dihedral angle (degrees) at or above which a forward-facing edge is sharp (§6.2).
+    pub sharp_cutoff_degrees: f32,
 }
 
 impl Default for SessionSettings {
     fn default() -> Self {
-        SessionSettings { sparseness: 64.0, max_fps: 30.0, batch_size: 256, max_age_frames: 120.0, paused: false }
+        SessionSettings {
+            sparseness: 64.0,
+            max_fps: 30.0,
+            batch_size: 256,
+            max_age_frames: 120.0,
+            paused: false,
+            reconstruction: Reconstruction::EdgeAndPoint,
+            complex_filter: true,
+            overlay: Overlay::None,
+            sharp_cutoff_degrees: crate::edges::DEFAULT_SHARP_CUTOFF_DEGREES,
+        }
     }
 }
 
@@ -29,6 +64,8 @@ pub const SPARSENESS_RANGE: (f64, f64) = (1.0, 1.0e6);
 pub const MAX_FPS_RANGE: (f64, f64) = (0.1, 1000.0);
 pub const BATCH_SIZE_RANGE: (u32, u32) = (1, 65_536);
 pub const MAX_AGE_RANGE: (f64, f64) = (1.0, 1.0e7);
+/// Sharp-edge cut-off angles accepted (degrees; 0 on the wire keeps the current value).
+pub const SHARP_CUTOFF_RANGE: (f64, f64) = (0.0, 180.0);
 
 fn check_f64(name: &str, v: f64, (lo, hi): (f64, f64)) -> Result<Option<f64>, String> {
     // Zero means "keep the current value" (proto3 has no presence for scalars).
@@ -63,6 +100,41 @@ impl SessionSettings {
         }
         if s.set_paused {
             out.paused = s.paused;
+        }
+        match pb::Reconstruction::try_from(s.reconstruction) {
+            Ok(pb::Reconstruction::Unspecified) => {}
+            Ok(pb::Reconstruction::EdgeAndPoint) => out.reconstruction = Reconstruction::EdgeAndPoint,
+            Ok(pb::Reconstruction::RenderCache) => out.reconstruction = Reconstruction::RenderCache,
+            Err(_) => {
+                return Err(format!(
+                    "settings.reconstruction {} is not a reconstruction mode (1 = edge-and-point, 2 = render cache, 0 to keep)",
+                    s.reconstruction
+                ))
+            }
+        }
+        match pb::Overlay::try_from(s.overlay) {
+            Ok(pb::Overlay::Unspecified) => {}
+            Ok(pb::Overlay::None) => out.overlay = Overlay::None,
+            Ok(pb::Overlay::Edges) => out.overlay = Overlay::Edges,
+            Ok(pb::Overlay::Classes) => out.overlay = Overlay::Classes,
+            Ok(pb::Overlay::Samples) => out.overlay = Overlay::Samples,
+            Err(_) => {
+                return Err(format!(
+                    "settings.overlay {} is not an overlay (1 = none, 2 = edges, 3 = classes, 4 = samples, 0 to keep)",
+                    s.overlay
+                ))
+            }
+        }
+        if let Some(on) = s.complex_filter {
+            out.complex_filter = on;
+        }
+        if s.sharp_cutoff_degrees != 0.0 {
+            let (lo, hi) = SHARP_CUTOFF_RANGE;
+            let v = s.sharp_cutoff_degrees;
+            if !v.is_finite() || v <= lo || v > hi {
+                return Err(format!("settings.sharp_cutoff_degrees must be in ({lo}, {hi}] (or 0 to keep), got {v}"));
+            }
+            out.sharp_cutoff_degrees = v as f32;
         }
         Ok(out)
     }
@@ -129,6 +201,31 @@ mod tests {
             assert!(e.starts_with("settings."), "{e}");
         }
         assert!(s.with(&pb::Settings { sparseness: 10.0, max_fps: -3.0, ..Default::default() }).is_err(), "all or nothing");
+        // Reconstruction settings: enums with "unspecified keeps", an optional flag, a range.
+        let r = s
+            .with(&pb::Settings {
+                reconstruction: pb::Reconstruction::RenderCache as i32,
+                overlay: pb::Overlay::Classes as i32,
+                complex_filter: Some(false),
+                sharp_cutoff_degrees: 30.0,
+                ..Default::default()
+            })
+            .unwrap();
+        assert_eq!((r.reconstruction, r.overlay, r.complex_filter, r.sharp_cutoff_degrees), (Reconstruction::RenderCache, Overlay::Classes, false, 30.0));
+        assert_eq!(r.with(&pb::Settings::default()).unwrap(), r, "unspecified keeps");
+        let back = r.with(&pb::Settings { reconstruction: 1, overlay: 1, complex_filter: Some(true), ..Default::default() }).unwrap();
+        assert_eq!((back.reconstruction, back.overlay, back.complex_filter), (Reconstruction::EdgeAndPoint, Overlay::None, true));
+        for bad in [
+            pb::Settings { reconstruction: 7, ..Default::default() },
+            pb::Settings { overlay: -1, ..Default::default() },
+            pb::Settings { sharp_cutoff_degrees: 181.0, ..Default::default() },
+            pb::Settings { sharp_cutoff_degrees: -5.0, ..Default::default() },
+            pb::Settings { sharp_cutoff_degrees: f64::NAN, ..Default::default() },
+        ] {
+            let e = s.with(&bad).unwrap_err();
+            assert!(e.starts_with("settings."), "{e}");
+        }
+        assert_eq!(s.reconstruction, Reconstruction::EdgeAndPoint, "edge-and-point by default");
         assert_eq!(s.frame_budget(64 * 48), 48);
         assert_eq!(SessionSettings { sparseness: 1e6, ..s }.frame_budget(10), 1);
     }

@@ -1,0 +1,255 @@
+//! `edgepoint-bench quality`: image quality of edge-and-point reconstruction against the
+//! Render Cache's interpolation from the same samples (paper 000 Fig. 11), as PSNR and SSIM
+//! against the converged reference.
+//!
+//! One fixed set of jittered pixels is shaded once per scene (in-process, deterministic); the
+//! sample set of each density is the pixels whose hashed rank is below it (so the 1 % set is
+//! part of the 5 % set, which is part of the 20 % set). Each set goes into a Render Cache,
+//! is reprojected once, and is reconstructed both ways.
+use crate::inprocess::{cache_with, jittered_picks, write_png, Staged};
+use anyhow::{bail, Result};
+use edgepoint_server::edges::brute::scene_edges;
+use edgepoint_server::epi::{Epi, InterpOptions, OwnSample, Overlay};
+use edgepoint_server::image_metrics::{psnr, ssim};
+use edgepoint_server::epi::spread::BaselineHoles;
+use edgepoint_server::render_cache::holes::HoleFill;
+use edgepoint_server::stage_times::StageTimes;
+use glam::{Affine3A, Vec3};
+use serde_json::json;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct QualityArgs {
+    /// Scene (repeatable): a built-in name or a .ply / .obj file (a bare model is staged on a
+    /// floor under a point light).
+    #[arg(long)]
+    pub scene: Vec<String>,
+    /// The four scenes of the issue: cornell-point (hard shadows), cornell (soft shadows), and
+    /// the bunny and the dragon from --data on a floor under a point light.
+    #[arg(long)]
+    pub all: bool,
+    /// Directory of the shared models (bunny/bun_zipper.ply, dragon/dragon_vrip.ply).
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))]
+    pub data: PathBuf,
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Fractions of pixels holding a sample (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.2")]
+    pub densities: Vec<f64>,
+    /// Samples per pixel of the converged reference.
+    #[arg(long, default_value_t = 64)]
+    pub reference_spp: u32,
+    /// Directory caching converged references (shared with `frame`).
+    #[arg(long, default_value = "target/edgepoint-refs")]
+    pub ref_cache: PathBuf,
+    /// Seed of the pixel set and its jitter.
+    #[arg(long, default_value_t = 0x5a3e)]
+    pub seed: u64,
+    /// Shader parameter KEY=VALUE (repeatable), e.g. shadow_rays=16.
+    #[arg(long = "shader-param", value_parser = crate::frame::parse_param)]
+    pub shader_params: Vec<(String, f64)>,
+    /// Write the reference, both reconstructions and the EPI class overlay of every density
+    /// as PNG files into DIR/<scene>/.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Tuning: interpolation kernel sigma in pixels.
+    #[arg(long, default_value_t = edgepoint_server::epi::DEFAULT_SIGMA)]
+    pub sigma: f32,
+    /// Tuning: filter a pixel's own sample with its neighbours instead of showing it.
+    #[arg(long)]
+    pub filter_own: bool,
+    /// Tuning: pixels that reach no sample take the unconstrained window mean (edge-blind)
+    /// instead of spreading colour from their region.
+    #[arg(long)]
+    pub fallback: bool,
+    /// Leave the pixels no sample reaches at the background in both reconstructions (the
+    /// renderer spreads colour into them from their neighbours — within their region for
+    /// edge-and-point, ignoring edges for the baseline — then fills the rest from coarser
+    /// sample averages).
+    #[arg(long)]
+    pub no_hole_fill: bool,
+    /// Ablation: run edge-and-point reconstruction with no edges at all (what remains of its
+    /// gain is not the edges' doing).
+    #[arg(long)]
+    pub no_edges: bool,
+    /// Turn the complex filter off.
+    #[arg(long)]
+    pub no_complex_filter: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: QualityArgs) -> Result<()> {
+    let mut scenes = args.scene.clone();
+    if args.all {
+        for s in ["cornell-point", "cornell"] {
+            scenes.push(s.to_string());
+        }
+        for m in ["bunny/bun_zipper.ply", "dragon/dragon_vrip.ply"] {
+            scenes.push(args.data.join(m).display().to_string());
+        }
+    }
+    if scenes.is_empty() {
+        bail!("name a scene with --scene (repeatable) or use --all");
+    }
+    if let Some(d) = args.densities.iter().find(|d| !(**d > 0.0 && **d <= 1.0)) {
+        bail!("--densities: {d} is not in (0, 1]");
+    }
+    let params: HashMap<String, f64> = args.shader_params.iter().cloned().collect();
+    let options = InterpOptions {
+        sigma: args.sigma,
+        own_sample: if args.filter_own { OwnSample::Filter } else { OwnSample::Show },
+        fallback: args.fallback,
+    };
+    let (w, h) = (args.width, args.height);
+    let mut results = Vec::new();
+    let mut table = String::new();
+    use std::fmt::Write;
+    writeln!(table, "quality at {w}x{h} vs {} spp reference (PSNR dB / SSIM)", args.reference_spp)?;
+    writeln!(
+        table,
+        "  {:<16} {:>7} {:>8} | {:>16} {:>16} | {:>7} | {:>6} {:>6} {:>6} {:>7} {:>7}",
+        "scene", "density", "samples", "render cache", "edge-and-point", "dPSNR", "simple", "cmplx", "ambig", "spread", "holes"
+    )?;
+    let mut notes = String::new();
+    for name in &scenes {
+        let staged = Staged::load(name, "direct", &params)?;
+        let tag = std::path::Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into_owned());
+        let (reference, cached) = staged.reference(w, h, args.reference_spp, &args.ref_cache)?;
+        tracing::info!("{name}: reference {}", if cached { "from the cache" } else { "rendered" });
+        let cam = staged.camera(w, h);
+        let top = args.densities.iter().cloned().fold(0.0, f64::max);
+        let picks = jittered_picks(w, h, top, args.seed);
+        let shaded = staged.shade(&cam, &picks, args.seed);
+        let transforms: Vec<Affine3A> = staged.loaded.scene.objects.iter().map(|o| o.transform).collect();
+        let mut edges = Vec::new();
+        if !args.no_edges {
+            scene_edges(&staged.loaded.scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+        }
+        let background = staged.loaded.scene.background;
+        let dir = args.out.as_ref().map(|d| d.join(&tag));
+        if let Some(d) = &dir {
+            std::fs::create_dir_all(d)?;
+            write_png(&d.join("reference.png"), w, h, &reference)?;
+        }
+        // Hard shadow boundaries (point lights): not yet edges of the EPI (shadow edges come
+        // with the edge trees), so the error there is reported apart.
+        let shadow = staged.shadow_boundaries(&cam, 2);
+        let mut epi = Epi::new(w, h);
+        let mut fill = HoleFill::new(w, h);
+        let mut baseline_holes = BaselineHoles::default();
+        for &density in &args.densities {
+            let samples: Vec<_> = picks.iter().zip(&shaded).filter(|(p, _)| (p.rank as f64) < density).map(|(_, s)| *s).collect();
+            let mut cache = cache_with(w, h, &cam, &samples, background);
+            let mut t = StageTimes::new();
+            // Both reconstructions as the renderer runs them, holes filled the same way.
+            cache.interpolate_gaps(&mut t);
+            let (points, image, weights) = cache.reconstruction_target();
+            if !args.no_hole_fill {
+                baseline_holes.fill(points, weights, image, &mut fill);
+            }
+            let baseline = cache.image().to_vec();
+            let counts = epi.build(&edges, &cam, cache.point_image(), !args.no_complex_filter, &mut t);
+            let (points, image, weights) = cache.reconstruction_target();
+            let rec = epi.reconstruct(points, background, &options, !args.no_complex_filter, image, weights, &mut t);
+            if !args.no_hole_fill {
+                fill.fill(points, epi.holes(), image);
+            }
+            let epr = cache.image().to_vec();
+            let (pb, pe) = (psnr(&baseline, &reference), psnr(&epr, &reference));
+            let (sb, se) = (ssim(&baseline, &reference, w, h), ssim(&epr, &reference, w, h));
+            // PSNR away from hard shadow boundaries, and the share of the squared error at them.
+            let off_shadow = shadow.as_ref().map(|mask| {
+                let keep = |img: &[Vec3]| img.iter().zip(mask).filter(|(_, m)| !**m).map(|(c, _)| *c).collect::<Vec<Vec3>>();
+                let r = keep(&reference);
+                let (b, e) = (psnr(&keep(&baseline), &r), psnr(&keep(&epr), &r));
+                let share = |img: &[Vec3]| {
+                    let err = |c: Vec3, r: Vec3| (0..3).map(|k| {
+                        let d = edgepoint_server::image_metrics::linear_to_srgb(c[k]) as f64 - edgepoint_server::image_metrics::linear_to_srgb(r[k]) as f64;
+                        d * d
+                    }).sum::<f64>();
+                    let (mut at, mut all) = (0.0, 0.0);
+                    for ((c, r), m) in img.iter().zip(&reference).zip(mask) {
+                        let e = err(*c, *r);
+                        all += e;
+                        if *m {
+                            at += e;
+                        }
+                    }
+                    if all > 0.0 { at / all } else { 0.0 }
+                };
+                json!({
+                    "pixels_near_shadow_boundaries": mask.iter().filter(|m| **m).count(),
+                    "render_cache_psnr_db": b, "edge_and_point_psnr_db": e, "psnr_gain_db": e - b,
+                    "render_cache_error_share_at_shadow_boundaries": share(&baseline),
+                    "edge_and_point_error_share_at_shadow_boundaries": share(&epr),
+                })
+            });
+            writeln!(
+                table,
+                "  {:<16} {:>6.1}% {:>8} | {:>7.2} / {:.4} {:>7.2} / {:.4} | {:>+7.2} | {:>6} {:>6} {:>6} {:>7} {:>7}",
+                tag,
+                density * 100.0,
+                samples.len(),
+                pb,
+                sb,
+                pe,
+                se,
+                pe - pb,
+                counts.simple,
+                counts.complex,
+                counts.ambiguous_samples,
+                rec.spread,
+                rec.interp.empty
+            )?;
+            if let Some(o) = &off_shadow {
+                writeln!(
+                    notes,
+                    "  {:<16} {:>6.1}%: off hard shadow boundaries {:.2} vs {:.2} dB ({:+.2}); share of the squared error at them: {:.0}% / {:.0}%",
+                    tag,
+                    density * 100.0,
+                    o["render_cache_psnr_db"].as_f64().unwrap_or(0.0),
+                    o["edge_and_point_psnr_db"].as_f64().unwrap_or(0.0),
+                    o["psnr_gain_db"].as_f64().unwrap_or(0.0),
+                    100.0 * o["render_cache_error_share_at_shadow_boundaries"].as_f64().unwrap_or(0.0),
+                    100.0 * o["edge_and_point_error_share_at_shadow_boundaries"].as_f64().unwrap_or(0.0),
+                )?;
+            }
+            results.push(json!({
+                "scene": name, "density": density, "samples": samples.len(),
+                "render_cache": { "psnr_db": pb, "ssim": sb },
+                "edge_and_point": { "psnr_db": pe, "ssim": se },
+                "psnr_gain_db": pe - pb,
+                "pixel_classes": { "empty": counts.empty, "simple": counts.simple, "complex": counts.complex },
+                "off_hard_shadow_boundaries": off_shadow,
+                "samples_usable": counts.usable_samples, "samples_ambiguous": counts.ambiguous_samples,
+                "pixels_unreached_fallback": rec.interp.fallback, "pixels_spread": rec.spread,
+                "pixels_without_reachable_sample": rec.interp.empty,
+                "edges": edges.len(), "fragments": counts.raster.fragments, "culled": counts.raster.culled,
+            }));
+            if let Some(d) = &dir {
+                let pct = format!("{:04.1}", density * 100.0);
+                write_png(&d.join(format!("render_cache_{pct}.png")), w, h, &baseline)?;
+                write_png(&d.join(format!("epr_{pct}.png")), w, h, &epr)?;
+                let mut classes = epr.clone();
+                epi.draw_overlay(Overlay::Classes, &mut classes);
+                write_png(&d.join(format!("classes_{pct}.png")), w, h, &classes)?;
+                let mut samples_img: Vec<Vec3> = epr.clone();
+                epi.draw_overlay(Overlay::Samples, &mut samples_img);
+                write_png(&d.join(format!("samples_{pct}.png")), w, h, &samples_img)?;
+            }
+        }
+    }
+    table.push_str(&notes);
+    let out = json!({
+        "width": w, "height": h, "reference_spp": args.reference_spp, "seed": args.seed,
+        "options": { "sigma": options.sigma, "own_sample": format!("{:?}", options.own_sample), "fallback": options.fallback, "complex_filter": !args.no_complex_filter, "hole_fill": !args.no_hole_fill },
+        "results": results,
+    });
+    crate::emit(args.json, &out, &table);
+    Ok(())
+}

@@ -1,0 +1,172 @@
+//! Anti-aliasing of simple pixels, paper 000 §5.3: a simple pixel's colour is the
+//! area-weighted mix of its primary and secondary regions' colours. Only the primary colour
+//! is interpolated; the secondary colour is approximated by the primary colour of a
+//! neighbouring pixel that an edge-indexed table picks ([`super::tables::CellTables::aa_candidates`]:
+//! the 4-neighbours whose centres lie on the secondary side of the edge, deepest first).
+//!
+//! Beyond the paper's table, a candidate is taken only if its primary region is reachable
+//! from this pixel's secondary region across their shared side (the neighbour mask's
+//! Sc↔Pn bit, already computed for reachability) and it got a colour from samples; the next
+//! candidate is tried otherwise. Without any, the pixel keeps its primary colour.
+//!
+//! The pass reads primary colours while it writes mixed ones, so the primary colours of
+//! simple pixels (the only ones it changes) are first copied into a compact array in scan
+//! order (a pixel's index is the number of simple pixels before it, from a count per
+//! 64-pixel word), the mixes go into a second compact array, and a last pass writes them
+//! into the image: no full-size colour buffer, and no pixel is read after it changed.
+use super::reach::{Neighbours, NB_PLANES};
+use super::tables::{tables, DIRS, DIR_DOWN, DIR_LEFT, DIR_RIGHT, DIR_UP, PS, SP};
+use super::{EpiPixel, Flags};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Primary and mixed colours of the simple pixels, in scan order.
+#[derive(Default)]
+pub struct SimpleColours {
+    /// Per (row, word): index of the word's first simple pixel in the colour arrays.
+    rank: Vec<u32>,
+    primary: Vec<Vec3>,
+    mixed: Vec<Vec3>,
+}
+
+/// Splits `buf` into the per-row ranges given by `rank` (row starts at `rank[y * words]`).
+fn row_chunks<'a>(buf: &'a mut [Vec3], rank: &[u32], words: usize, h: usize) -> Vec<&'a mut [Vec3]> {
+    let total = buf.len();
+    let mut rest = buf;
+    let mut chunks = Vec::with_capacity(h);
+    for y in 0..h {
+        let end = if y + 1 < h { rank[(y + 1) * words] as usize } else { total };
+        let (row, tail) = std::mem::take(&mut rest).split_at_mut(end - rank[y * words] as usize);
+        chunks.push(row);
+        rest = tail;
+    }
+    chunks
+}
+
+impl SimpleColours {
+    /// Bytes of the ranks: 4 per 64 pixels.
+    pub fn rank_bytes(&self) -> usize {
+        self.rank.capacity() * 4
+    }
+
+    /// Bytes of the colours: 24 per simple pixel (of the frame with the most).
+    pub fn colour_bytes(&self) -> usize {
+        (self.primary.capacity() + self.mixed.capacity()) * 12
+    }
+
+    /// Ranks the simple pixels and copies their primary colours out of `image`.
+    fn gather(&mut self, flags: &Flags, image: &[Vec3]) {
+        let (w, h, words) = (flags.width, flags.height, flags.words);
+        self.rank.resize(h * words, 0);
+        let mut total = 0u32;
+        for y in 0..h {
+            let row = flags.row(y, Flags::SIMPLE);
+            for (rank, word) in self.rank[y * words..(y + 1) * words].iter_mut().zip(row) {
+                *rank = total;
+                total += word.count_ones();
+            }
+        }
+        self.primary.resize(total as usize, Vec3::ZERO);
+        self.mixed.resize(total as usize, Vec3::ZERO);
+        row_chunks(&mut self.primary, &self.rank, words, h).into_par_iter().enumerate().for_each(|(y, out)| {
+            let mut n = 0;
+            for j in 0..words {
+                let mut bits = flags.row(y, Flags::SIMPLE)[j];
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    out[n] = image[y * w + 64 * j + i];
+                    n += 1;
+                }
+            }
+        });
+    }
+}
+
+/// Anti-aliases the simple pixels of `image`; returns how many took a secondary colour.
+pub fn antialias(pixels: &[EpiPixel], flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3]) -> u32 {
+    let (w, h, words) = (flags.width, flags.height, flags.words);
+    if w == 0 || h == 0 {
+        return 0;
+    }
+    simple.gather(flags, image);
+    let t = tables();
+    let nb_bit = |y: usize, x: usize, plane: usize| (nb.planes[(y * NB_PLANES + plane) * words + x / 64] >> (x % 64)) & 1 == 1;
+    let filled_at = |x: usize, y: usize| (filled[y * words + x / 64] >> (x % 64)) & 1 == 1;
+    let is_simple = |x: usize, y: usize| (flags.row(y, Flags::SIMPLE)[x / 64] >> (x % 64)) & 1 == 1;
+    let plane_of = |mask_bit: u8| mask_bit.trailing_zeros() as usize;
+    // Mix into the compact array (reading the primary copies and the unchanged non-simple
+    // pixels of the image), then write the mixes into the image.
+    let SimpleColours { rank, primary, mixed } = simple;
+    let (rank, primary, img) = (&*rank, &*primary, &*image);
+    let index = |x: usize, y: usize| {
+        let (j, i) = (x / 64, x % 64);
+        rank[y * words + j] as usize + (flags.row(y, Flags::SIMPLE)[j] & ((1u64 << i) - 1)).count_ones() as usize
+    };
+    let count: u32 = row_chunks(mixed, rank, words, h)
+        .into_par_iter()
+        .enumerate()
+        .map(|(y, out)| {
+            let mut n = 0;
+            let mut mixed = 0u32;
+            for j in 0..words {
+                let mut bits = flags.row(y, Flags::SIMPLE)[j];
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let x = 64 * j + i;
+                    let p = pixels[y * w + x];
+                    let code = p.code();
+                    let area_a = t.pixel.area_a(code);
+                    let primary_area = if p.primary_b() { 1.0 - area_a } else { area_a };
+                    let own = primary[index(x, y)];
+                    out[n] = own;
+                    for d in t.pixel.aa_candidates(code, !p.primary_b()) {
+                        if d == 0xFF {
+                            break;
+                        }
+                        let (dx, dy) = DIRS[d as usize];
+                        let (nx, ny) = (x as i64 + dx as i64, y as i64 + dy as i64);
+                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                            continue;
+                        }
+                        let (nx, ny) = (nx as usize, ny as usize);
+                        // Sc<->Pn across the shared side.
+                        let reach = match d as usize {
+                            DIR_RIGHT => nb_bit(y, x, plane_of(SP)),
+                            DIR_LEFT => nb_bit(y, nx, plane_of(PS)),
+                            DIR_DOWN => nb_bit(y, x, 4 + plane_of(SP)),
+                            _ => {
+                                debug_assert_eq!(d as usize, DIR_UP);
+                                nb_bit(ny, x, 4 + plane_of(PS))
+                            }
+                        };
+                        if !reach || !filled_at(nx, ny) {
+                            continue;
+                        }
+                        let secondary = if is_simple(nx, ny) { primary[index(nx, ny)] } else { img[ny * w + nx] };
+                        out[n] = own * primary_area + secondary * (1.0 - primary_area);
+                        mixed += 1;
+                        break;
+                    }
+                    n += 1;
+                }
+            }
+            mixed
+        })
+        .sum();
+    let mixed = &*mixed;
+    image.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut n = rank[y * words] as usize;
+        for j in 0..words {
+            let mut bits = flags.row(y, Flags::SIMPLE)[j];
+            while bits != 0 {
+                let i = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                row[64 * j + i] = mixed[n];
+                n += 1;
+            }
+        }
+    });
+    count
+}

@@ -1,0 +1,163 @@
+//! The complex filter: subpixel reachability against a flood fill over subpixel regions,
+//! and reconstruction of a pixel where two edges cross.
+use super::*;
+use crate::epi::tables::orient;
+use crate::epi::testutil::{draw_segment, monotone_paths, random_epi, random_points, regions_meeting, Rng};
+use crate::epi::Epi;
+use std::collections::{HashSet, VecDeque};
+
+/// Region (0 primary, 1 secondary) of point `r` of a subpixel; `None` if complex.
+fn region(s: &Sub, r: [f64; 2]) -> Option<usize> {
+    if s.c4 == CLASS_COMPLEX {
+        return None;
+    }
+    if s.c4 == CLASS_EMPTY {
+        return Some(0);
+    }
+    let (a, b) = SUBPIXEL.ends(s.code);
+    let on_b = orient(SUBPIXEL.boundary_point(a), SUBPIXEL.boundary_point(b), r) < 0.0;
+    Some(usize::from(on_b != s.primary_b))
+}
+
+fn meeting(a: &Sub, b: &Sub, d: (i64, i64)) -> Vec<(usize, usize)> {
+    regions_meeting(|r| region(a, r), |r| region(b, r), d, 100)
+}
+
+/// Whether region `from` of subpixel s reaches the primary region of t along some monotone
+/// path of the grid (flood fill over the regions of the path's subpixels).
+fn oracle(grid: &[Sub; 36], s: (i64, i64), t: (i64, i64), from: usize) -> bool {
+    let at = |p: (i64, i64)| &grid[(p.1 * 6 + p.0) as usize];
+    if at(s).c4 == CLASS_COMPLEX || at(t).c4 == CLASS_COMPLEX || (from == 1 && at(s).c4 == CLASS_EMPTY) {
+        return false;
+    }
+    for path in monotone_paths(t.0 - s.0, t.1 - s.1) {
+        let cells: HashSet<(i64, i64)> = path.iter().map(|&(dx, dy)| (s.0 + dx, s.1 + dy)).collect();
+        let mut seen = HashSet::from([(s, from)]);
+        let mut queue = VecDeque::from([(s, from)]);
+        while let Some((p, r)) = queue.pop_front() {
+            if p == t && r == 0 {
+                return true;
+            }
+            for d in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                let n = (p.0 + d.0, p.1 + d.1);
+                if !cells.contains(&n) {
+                    continue;
+                }
+                for (ra, rb) in meeting(at(p), at(n), d) {
+                    if ra == r && seen.insert((n, rb)) {
+                        queue.push_back((n, rb));
+                    }
+                }
+            }
+        }
+    }
+    false
+}
+
+#[test]
+fn subpixel_reachability_matches_flood_fill_on_random_epis() {
+    let t = tables();
+    let mut rng = Rng(41);
+    let mut tested = 0;
+    for _ in 0..6 {
+        let points = random_points(24, 18, 0.6, &mut rng);
+        let epi = random_epi(&points, 6, 10, true, &mut rng);
+        let input = ComplexInput { bounds: epi.boundaries(), pixels: epi.pixels(), flags: epi.flags(), points: &points, sigma: 0.8 };
+        for y in 0..18 {
+            for x in 0..24 {
+                if !epi.pixels()[y * 24 + x].is_complex() {
+                    continue;
+                }
+                let grid = subpixel_grid(t, &input, x, y);
+                for (sx, sy) in [(2usize, 2usize), (3, 2), (2, 3), (3, 3)] {
+                    if grid[sy * 6 + sx].c4 == CLASS_COMPLEX {
+                        continue;
+                    }
+                    let m = propagate(t, &grid, sx, sy);
+                    for (k, mk) in m.iter().enumerate() {
+                        let tt = ((k % 6) as i64, (k / 6) as i64);
+                        let s = (sx as i64, sy as i64);
+                        assert_eq!(mk & PP != 0, oracle(&grid, s, tt, 0), "pixel ({x},{y}) s {s:?} t {tt:?} PP");
+                        assert_eq!(mk & SP != 0, oracle(&grid, s, tt, 1), "pixel ({x},{y}) s {s:?} t {tt:?} SP");
+                    }
+                    tested += 1;
+                }
+            }
+        }
+    }
+    assert!(tested > 50, "{tested} subpixels tested");
+}
+
+#[test]
+fn subpixel_masks_split_the_pixel_sides_and_centre_lines() {
+    let mut rng = Rng(43);
+    let points = random_points(12, 10, 0.5, &mut rng);
+    let epi = random_epi(&points, 5, 5, true, &mut rng);
+    let b = epi.boundaries();
+    for y in 0..10 {
+        for x in 0..12 {
+            let m = |qx, qy| subpixel_mask(b, x, y, qx, qy);
+            let side = |m: u32, s: u32| (m >> (4 * s)) & 0xF;
+            // The four subpixels' outer sides put together are the pixel's sides.
+            assert_eq!(side(m(0, 0), 0) | side(m(1, 0), 0) << 4, u32::from(b.top(x, y)));
+            assert_eq!(side(m(0, 1), 2) | side(m(1, 1), 2) << 4, u32::from(b.bottom(x, y)));
+            assert_eq!(side(m(0, 0), 3) | side(m(0, 1), 3) << 4, u32::from(b.left(x, y)));
+            assert_eq!(side(m(1, 0), 1) | side(m(1, 1), 1) << 4, u32::from(b.right(x, y)));
+            // Inner sides are shared: the centre lines.
+            assert_eq!(side(m(0, 0), 1), side(m(1, 0), 3));
+            assert_eq!(side(m(0, 0), 2), side(m(0, 1), 0));
+            assert_eq!(side(m(0, 0), 1) | side(m(0, 1), 1) << 4, u32::from(b.centre_vertical(x, y)));
+        }
+    }
+}
+
+#[test]
+fn two_crossing_edges_are_reconstructed_better_than_by_plain_interpolation() {
+    // Two lines crossing inside pixel (5, 5) of an 11 x 11 image cut the plane into four
+    // sectors of different colours; every pixel holds a sample coloured by its sector.
+    let (w, h) = (11usize, 11usize);
+    let lines = [([0.0, 1.3], [11.0, 9.9]), ([9.7, 0.0], [1.4, 11.0])];
+    let sector = |p: [f64; 2]| {
+        let s0 = orient(lines[0].0, lines[0].1, p) > 0.0;
+        let s1 = orient(lines[1].0, lines[1].1, p) > 0.0;
+        usize::from(s0) * 2 + usize::from(s1)
+    };
+    let colours = [Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 1.0, 0.0)];
+    let mut rng = Rng(47);
+    let mut points = random_points(w, h, 1.0, &mut rng);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let [u, v] = points.subpixel[i];
+            points.color[i] = colours[sector([x as f64 + u as f64, y as f64 + v as f64])];
+        }
+    }
+    let mut sides = vec![0u16; (w + 1) * (h + 1)];
+    let mut centres = vec![0u16; w * h];
+    for (a, b) in lines {
+        draw_segment(w, h, &mut sides, &mut centres, a, b);
+    }
+    let mut epi = Epi::new(w as u32, h as u32);
+    epi.classify_with(sides, centres, &points);
+    let c = (5usize, 5usize);
+    assert!(epi.pixels()[c.1 * w + c.0].is_complex());
+    // The exact pixel colour: sector areas by fine sampling.
+    let mut exact = Vec3::ZERO;
+    const N: usize = 64;
+    for i in 0..N {
+        for j in 0..N {
+            exact += colours[sector([c.0 as f64 + (i as f64 + 0.5) / N as f64, c.1 as f64 + (j as f64 + 0.5) / N as f64])];
+        }
+    }
+    exact /= (N * N) as f32;
+    let options = crate::epi::InterpOptions { own_sample: crate::epi::OwnSample::Filter, ..Default::default() };
+    let mut times = crate::stage_times::StageTimes::new();
+    let (mut plain, mut wts) = (vec![Vec3::ZERO; w * h], vec![0.0; w * h]);
+    epi.reconstruct(&points, Vec3::ZERO, &options, false, &mut plain, &mut wts, &mut times);
+    let mut filtered = vec![Vec3::ZERO; w * h];
+    let counts = epi.reconstruct(&points, Vec3::ZERO, &options, true, &mut filtered, &mut wts, &mut times);
+    assert!(counts.complex_refined >= 1);
+    let (e_plain, e_filtered) = ((plain[c.1 * w + c.0] - exact).length(), (filtered[c.1 * w + c.0] - exact).length());
+    assert!(e_filtered < 0.5 * e_plain, "complex filter error {e_filtered} vs plain {e_plain} (exact {exact})");
+    assert!(times.get(crate::epi::STAGE_COMPLEX).is_some());
+}

@@ -1,0 +1,162 @@
+//! Deterministic randomness for the EPI tests.
+#![cfg(test)]
+
+/// splitmix64.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn f64(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    pub fn f32(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in 0..n.
+    pub fn below(&mut self, n: u32) -> u32 {
+        (((self.next() >> 32) * n as u64) >> 32) as u32
+    }
+
+    pub fn chance(&mut self, p: f64) -> bool {
+        self.f64() < p
+    }
+}
+
+use super::Epi;
+use crate::render_cache::{PointImage, NO_POINT};
+use glam::Vec3;
+
+/// Eighth of [0, 1) holding `f`.
+fn eighth(f: f64) -> u32 {
+    ((f * 8.0) as u32).min(7)
+}
+
+/// Records the crossings of the 2D segment `a`-`b` (pixel coordinates) with the boundary
+/// lines of a `w` x `h` image (and the centre lines when `centres` is not empty).
+pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], a: [f64; 2], b: [f64; 2]) {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    for (offset, centre) in [(0.0, false), (0.5, true)] {
+        if centre && centres.is_empty() {
+            continue;
+        }
+        if dx != 0.0 {
+            let (lo, hi) = (a[0].min(b[0]) - offset, a[0].max(b[0]) - offset);
+            for xl in lo.ceil().max(0.0) as i64..=hi.floor().min((w - usize::from(centre)) as f64) as i64 {
+                let t = (xl as f64 + offset - a[0]) / dx;
+                let y = a[1] + t * dy;
+                if y >= 0.0 && y < h as f64 {
+                    let yy = y.floor();
+                    if centre {
+                        centres[yy as usize * w + xl as usize] |= 1 << eighth(y - yy);
+                    } else {
+                        sides[yy as usize * (w + 1) + xl as usize] |= 1 << eighth(y - yy);
+                    }
+                }
+            }
+        }
+        if dy != 0.0 {
+            let (lo, hi) = (a[1].min(b[1]) - offset, a[1].max(b[1]) - offset);
+            for yl in lo.ceil().max(0.0) as i64..=hi.floor().min((h - usize::from(centre)) as f64) as i64 {
+                let t = (yl as f64 + offset - a[1]) / dy;
+                let x = a[0] + t * dx;
+                if x >= 0.0 && x < w as f64 {
+                    let xx = x.floor();
+                    if centre {
+                        centres[yl as usize * w + xx as usize] |= 1 << (8 + eighth(x - xx));
+                    } else {
+                        sides[yl as usize * (w + 1) + xx as usize] |= 1 << (8 + eighth(x - xx));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A random point image: each pixel holds a point with probability `density`, at a random
+/// position inside it, with a random colour.
+pub fn random_points(w: usize, h: usize, density: f64, rng: &mut Rng) -> PointImage {
+    let mut pi = PointImage { width: w as u32, height: h as u32, ..Default::default() };
+    for i in 0..w * h {
+        let has = rng.chance(density);
+        pi.point.push(if has { i as u32 } else { NO_POINT });
+        pi.depth.push(if has { 1.0 + rng.f32() } else { f32::INFINITY });
+        pi.subpixel.push([rng.f32(), rng.f32()]);
+        pi.color.push(if has { Vec3::new(rng.f32(), rng.f32(), rng.f32()) } else { Vec3::ZERO });
+        pi.age.push(if has { 1.0 } else { f32::INFINITY });
+    }
+    pi
+}
+
+/// A random EPI over `points`: `long` lines across the image (chains of simple pixels,
+/// crossings making complex ones) and `short` segments (ends inside pixels: complex).
+pub fn random_epi(points: &PointImage, long: usize, short: usize, centre_lines: bool, rng: &mut Rng) -> Epi {
+    let (w, h) = (points.width as usize, points.height as usize);
+    let mut sides = vec![0u16; (w + 1) * (h + 1)];
+    let mut centres = if centre_lines { vec![0u16; w * h] } else { Vec::new() };
+    let (wf, hf) = (w as f64, h as f64);
+    for k in 0..long + short {
+        let a = [rng.f64() * (wf + 4.0) - 2.0, rng.f64() * (hf + 4.0) - 2.0];
+        let b = if k < long {
+            [rng.f64() * (wf + 4.0) - 2.0, rng.f64() * (hf + 4.0) - 2.0]
+        } else {
+            [a[0] + rng.f64() * 6.0 - 3.0, a[1] + rng.f64() * 6.0 - 3.0]
+        };
+        draw_segment(w, h, &mut sides, &mut centres, a, b);
+    }
+    let mut epi = Epi::new(w as u32, h as u32);
+    epi.classify_with(sides, centres, points);
+    epi
+}
+
+/// All monotone lattice paths from (0, 0) to (dx, dy), as offset lists (the "reasonably
+/// direct" paths of paper 000 §5.2).
+pub fn monotone_paths(dx: i64, dy: i64) -> Vec<Vec<(i64, i64)>> {
+    if dx == 0 && dy == 0 {
+        return vec![vec![(0, 0)]];
+    }
+    let mut out = Vec::new();
+    if dx != 0 {
+        for mut p in monotone_paths(dx - dx.signum(), dy) {
+            p.push((dx, dy));
+            out.push(p);
+        }
+    }
+    if dy != 0 {
+        for mut p in monotone_paths(dx, dy - dy.signum()) {
+            p.push((dx, dy));
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The pairs (region of cell a, region of cell b) that meet along the side the two cells
+/// share, cell b lying at `d` from cell a; `region_a` / `region_b` give the region (or
+/// `None` for a complex cell) of a point in each cell's unit square. Tested at `steps`
+/// points along the side, never exactly at a crossing ((p + 1/2) / 8 of the side).
+pub fn regions_meeting(region_a: impl Fn([f64; 2]) -> Option<usize>, region_b: impl Fn([f64; 2]) -> Option<usize>, d: (i64, i64), steps: usize) -> Vec<(usize, usize)> {
+    let mut out = std::collections::HashSet::new();
+    for k in 0..steps {
+        let t = (k as f64 + 0.37) / steps as f64;
+        let (pa, pb) = match d {
+            (1, 0) => ([1.0, t], [0.0, t]),
+            (-1, 0) => ([0.0, t], [1.0, t]),
+            (0, 1) => ([t, 1.0], [t, 0.0]),
+            _ => ([t, 0.0], [t, 1.0]),
+        };
+        if let (Some(x), Some(y)) = (region_a(pa), region_b(pb)) {
+            out.insert((x, y));
+        }
+    }
+    out.into_iter().collect()
+}
