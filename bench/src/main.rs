@@ -11,7 +11,9 @@
 //! - `throughput`: samples/s of 1..K workers at batch size B, their scaling, and the gRPC
 //!   overhead against calling the shader in-process with the same thread count.
 //! - `load`: scene load (parse + weld + adjacency) and BVH build times.
+//! - `edges`: edge-tree build and silhouette times against brute force, shadow-edge times.
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
+mod edges;
 mod frame;
 mod load;
 mod reference_cache;
@@ -35,6 +37,8 @@ enum Cmd {
     Throughput(throughput::ThroughputArgs),
     /// Scene load, weld and BVH build times.
     Load(load::LoadArgs),
+    /// Edge trees and shadow edges: build time, silhouette time vs brute force, shadow-edge time.
+    Edges(edges::EdgesArgs),
     /// Render the 1-spp and converged reference images of a scene through local workers.
     Reference(frame::ReferenceArgs),
 }
@@ -52,6 +56,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Throughput(a) => throughput::run(a),
         Cmd::Load(a) => load::run(a),
         Cmd::Reference(a) => frame::run_reference(a),
+        Cmd::Edges(a) => edges::run(a),
     }
 }
 

@@ -8,6 +8,9 @@
 use glam::{Affine3A, Vec3};
 
 pub mod brute;
+pub mod geometric;
+pub mod interval;
+pub mod tree;
 
 /// Default sharp-edge cut-off (paper §6.2: "In our scenes, the cutoff angle is 85°"): an edge
 /// whose face normals differ by at least this angle is sharp.
