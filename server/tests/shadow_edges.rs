@@ -531,3 +531,87 @@ fn area_light_umbral_and_penumbral_edges_agree_with_ray_traced_visibility_in_the
     assert_agrees("cornell penumbral extremal", &r.penumbral_extremal, 50);
     eprintln!("cornell umbral extremal: {:.3}", r.umbral_extremal.fraction());
 }
+
+/// Sorted shadow edges, as comparable keys.
+fn shadow_keys(segs: &[EdgeSegment]) -> Vec<(u32, EdgeKind, [f32; 6])> {
+    let mut v: Vec<_> = segs
+        .iter()
+        .filter(|s| !s.kind.is_geometric())
+        .map(|s| (s.object, s.kind, [s.a.x, s.a.y, s.a.z, s.b.x, s.b.y, s.b.z]))
+        .collect();
+    v.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.partial_cmp(&b.2).unwrap()));
+    v
+}
+
+/// Incremental updates (moves of blockers, receivers and bystanders; triples appearing and
+/// disappearing) give exactly what a finder built from scratch for the same state gives.
+fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
+    let scene = edgepoint_scene::builtin::load(name).unwrap();
+    let n = scene.objects.len();
+    let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+    let tracer = Tracer::new(&scene, &t);
+    let all: Vec<TripleKey> = traced_triples(&scene, &t, &tracer, 2000).into_iter().collect();
+    assert!(all.len() >= 3, "{name}: {} triples", all.len());
+    let mut rng = Rng(seed);
+    let mut live = Finder::new(&scene);
+    let (lo, hi) = scene.bounds();
+    let size = (hi - lo).length();
+    let mut moved_total = 0;
+    let mut recomputed = 0;
+    let (mut reused_steps, mut nonempty) = (0, 0);
+    for step in 0..steps {
+        // Move one or two objects a little (translation and a turn about y).
+        for _ in 0..1 + (rng.next() % 2) {
+            let o = (rng.next() % n as u64) as usize;
+            let d = Vec3::new(rng.unit() - 0.5, (rng.unit() - 0.5) * 0.2, rng.unit() - 0.5) * size * 0.02;
+            let c = t[o].transform_point3((scene.objects[o].mesh.bounds.0 + scene.objects[o].mesh.bounds.1) * 0.5);
+            t[o] = Affine3A::from_translation(c + d)
+                * Affine3A::from_rotation_y((rng.unit() - 0.5) * 0.2)
+                * Affine3A::from_translation(-c)
+                * t[o];
+            moved_total += 1;
+        }
+        // A random subset of the triples (some appear, some go).
+        let triples: Vec<TripleKey> = all.iter().copied().filter(|_| rng.next() % 4 != 0).collect();
+        let got = live.frame(&t, &triples);
+        recomputed += live.last.shadow.events_clipped;
+        let st = live.last.shadow;
+        if step > 0 && st.pairs_recomputed < st.pairs {
+            reused_steps += 1;
+        }
+        nonempty += !shadow_keys(&got).is_empty() as usize;
+        let want = Finder::new(&scene).frame(&t, &triples);
+        assert_eq!(shadow_keys(&got), shadow_keys(&want), "{name}: step {step}");
+    }
+    assert!(moved_total > 0 && recomputed > 0);
+    // The incremental path was taken (some pairs kept their events) and there was
+    // something to compare.
+    assert!(reused_steps >= steps / 3, "{name}: {reused_steps} steps reused pairs");
+    assert!(nonempty >= steps - 1, "{name}: {nonempty} steps with shadow edges");
+}
+
+struct Finder {
+    f: EdgeFinder,
+    last: edgepoint_server::edges::finder::FrameEdgeStats,
+}
+
+impl Finder {
+    fn new(scene: &Scene) -> Finder {
+        Finder { f: EdgeFinder::new(scene, &NoProgress), last: Default::default() }
+    }
+    fn frame(&mut self, t: &[Affine3A], triples: &[TripleKey]) -> Vec<EdgeSegment> {
+        let mut out = Vec::new();
+        self.last = self.f.frame(t, Vec3::new(0.3, 0.3, -1.0), None, triples.iter().copied(), 85.0, &mut out);
+        out
+    }
+}
+
+#[test]
+fn incremental_shadow_updates_equal_full_recomputation_under_a_point_light() {
+    incremental_equals_full("cornell-point", 12, 21);
+}
+
+#[test]
+fn incremental_shadow_updates_equal_full_recomputation_under_an_area_light() {
+    incremental_equals_full("cornell", 12, 22);
+}
