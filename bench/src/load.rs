@@ -34,7 +34,7 @@ pub fn run(a: LoadArgs) -> Result<()> {
         let t = Instant::now();
         let scene = match &a.mesh {
             Some(p) => edgepoint_scene::load::load_path(p, &progress).map_err(|e| anyhow::anyhow!("{e}"))?,
-            None => edgepoint_scene::builtin::load(&what).map_err(|e| anyhow::anyhow!(e))?,
+            None => edgepoint_scene::data::load_builtin(&what, None, &progress).map_err(|e| anyhow::anyhow!(e))?,
         };
         load_ms.push(t.elapsed().as_secs_f64() * 1e3);
         if i == 0 {

@@ -16,7 +16,7 @@ pub mod local;
 pub mod script;
 pub mod window;
 
-pub use client::{scene_source_from_arg, ClientError, Event, SessionClient, SessionSender};
+pub use client::{scene_source_from_arg, scene_source_from_arg_in, ClientError, Event, SessionClient, SessionSender};
 pub use headless::{FrameStats, HeadlessWriter};
 pub use local::{find_binary, LocalCluster, LocalOptions};
 pub use script::{CameraRig, ObjectSlide, Script};
