@@ -39,40 +39,10 @@ fn data(path: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(path)
 }
 
-/// Points on the light used to decide visibility: the vertices and many points along the
-/// edges pulled in by a hair (where the blocked or visible sliver next to an extremal
-/// edge lies), and an interior grid.
-fn light_samples(l: &Light) -> Vec<Vec3> {
-    match l {
-        Light::Point { position, .. } => vec![*position],
-        Light::Area { vertices, .. } => {
-            let c = l.center();
-            let size = vertices.iter().map(|v| (*v - c).length()).fold(0.0, f32::max);
-            let pull = |p: Vec3| p + (c - p).normalize_or_zero() * size * 1e-4;
-            let k = vertices.len();
-            let mut out = Vec::new();
-            for i in 0..k {
-                let (a, b) = (vertices[i], vertices[(i + 1) % k]);
-                for s in 0..48 {
-                    out.push(pull(a + (b - a) * (s as f32 / 48.0)));
-                }
-            }
-            for i in 1..8 {
-                for j in 1..8 {
-                    // Bilinear-ish interior points through the fan from the centre.
-                    let v = vertices[(i + j) % k];
-                    out.push(c + (v - c) * (i as f32 / 8.0) * (j as f32 / 8.0));
-                }
-            }
-            out
-        }
-    }
-}
-
+/// The shader worker's ray tracer over the whole scene.
 struct Tracer {
     bvh: SceneBvh,
     inst: Instances,
-    eps: f32,
 }
 
 impl Tracer {
@@ -80,17 +50,7 @@ impl Tracer {
         let meshes: Vec<_> = scene.objects.iter().map(|o| o.mesh.as_ref()).collect();
         let bvh = SceneBvh::build(&meshes, &NoProgress);
         let inst = Instances::new(&bvh, t);
-        let (lo, hi) = scene.bounds();
-        Tracer { bvh, inst, eps: (hi - lo).length() * 2e-6 }
-    }
-
-    /// Of the light samples in front of the surface at `o` (normal `n`): how many are
-    /// visible, and how many there are.
-    #[allow(dead_code)]
-    fn visible(&self, o: Vec3, n: Vec3, samples: &[Vec3]) -> (usize, usize) {
-        let above: Vec<&Vec3> = samples.iter().filter(|&&x| n.dot(x - o) > 0.0).collect();
-        let vis = above.iter().filter(|&&&x| self.inst.occluded(&self.bvh, o, x - o, 1e-6, 1.0 - 1e-5).is_none()).count();
-        (vis, above.len())
+        Tracer { bvh, inst }
     }
 }
 
@@ -145,38 +105,13 @@ fn closest_on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
     a + ab * (vb * den) + ac * (vc * den)
 }
 
-/// Triples the way the workers find them: points on every object, shadow rays to light
-/// samples, the blocking object named.
-fn traced_triples(scene: &Scene, t: &[Affine3A], tracer: &Tracer, per_object: usize) -> BTreeSet<TripleKey> {
-    let mut rng = Rng(99);
-    let mut out = BTreeSet::new();
-    for (r, obj) in scene.objects.iter().enumerate() {
-        let m = &obj.mesh;
-        for _ in 0..per_object {
-            let f = (rng.next() % m.triangles.len() as u64) as usize;
-            let [a, b, c] = m.triangle(f);
-            let (mut u, mut v) = (rng.unit(), rng.unit());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let p = t[r].transform_point3(a + (b - a) * u + (c - a) * v);
-            let n = t[r].transform_vector3(m.face_normals[f]).normalize_or_zero();
-            for (li, l) in scene.lights.iter().enumerate() {
-                let samples = light_samples(l);
-                for _ in 0..4 {
-                    let x = samples[(rng.next() % samples.len() as u64) as usize];
-                    if n.dot(x - p) <= 0.0 {
-                        continue;
-                    }
-                    let o = p + n * tracer.eps;
-                    if let Some(bl) = tracer.inst.occluded(&tracer.bvh, o, x - o, 1e-6, 1.0 - 1e-5) {
-                        out.insert(TripleKey { light: li as u32, blocker: bl, receiver: r as u32 });
-                    }
-                }
-            }
-        }
-    }
-    out
+/// Triples the way the workers find them: shadow rays from points on every object.
+fn traced_triples(scene: &Scene, t: &[Affine3A], per_object: usize) -> BTreeSet<TripleKey> {
+    let loaded = edgepoint_worker::LoadedScene::build(scene.clone(), "test".into(), &NoProgress);
+    edgepoint_worker::sample_triples(&loaded, t, per_object, 4, 99)
+        .into_iter()
+        .map(|(light, blocker, receiver)| TripleKey { light, blocker, receiver })
+        .collect()
 }
 
 /// Distance between segments `p0 p1` and `q0 q1` (sampled finely: the segments here are
@@ -382,7 +317,7 @@ struct Setup {
 fn setup(scene: Scene) -> Setup {
     let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
     let tracer = Tracer::new(&scene, &t);
-    let triples = traced_triples(&scene, &t, &tracer, 3000);
+    let triples = traced_triples(&scene, &t, 3000);
     assert!(!triples.is_empty());
     let mut finder = EdgeFinder::new(&scene, &NoProgress);
     let mut out = Vec::new();
@@ -549,8 +484,7 @@ fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
     let scene = edgepoint_scene::builtin::load(name).unwrap();
     let n = scene.objects.len();
     let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
-    let tracer = Tracer::new(&scene, &t);
-    let all: Vec<TripleKey> = traced_triples(&scene, &t, &tracer, 2000).into_iter().collect();
+    let all: Vec<TripleKey> = traced_triples(&scene, &t, 2000).into_iter().collect();
     assert!(all.len() >= 3, "{name}: {} triples", all.len());
     let mut rng = Rng(seed);
     let mut live = Finder::new(&scene);
