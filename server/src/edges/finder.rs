@@ -95,7 +95,8 @@ pub struct EdgeFinder {
     /// Transforms of the last frame (moves are found by comparing).
     transforms: Vec<Affine3A>,
     light_moved: Vec<bool>,
-    first_frame: bool,
+    /// Objects moved since the last shadow update.
+    moved: Vec<bool>,
     cos_cutoff: Option<f32>,
     store: ShadowStore,
     pub build: FinderBuildStats,
@@ -135,8 +136,8 @@ impl EdgeFinder {
             lights: scene.lights.clone(),
             transforms: defaults.clone(),
             light_moved: vec![false; scene.lights.len()],
+            moved: vec![false; meshes.len()],
             defaults,
-            first_frame: true,
             cos_cutoff: None,
             store: ShadowStore::new(),
             build: FinderBuildStats { edge_trees_ms, face_bvhs_ms, rings_ms, edges, faces },
@@ -164,6 +165,9 @@ impl EdgeFinder {
     /// whole current set) on receivers in view. `transforms[o]` is object `o`'s current
     /// object-to-world transform (missing entries: the scene's default); objects whose
     /// transform changed since the last frame count as moved.
+    ///
+    /// The same as [`Self::set_transforms`], [`Self::geometric_edges`] and
+    /// [`Self::shadow_edges`] in a row (call those to run the parts on their own).
     pub fn frame(
         &mut self,
         transforms: &[Affine3A],
@@ -173,16 +177,57 @@ impl EdgeFinder {
         sharp_cutoff_degrees: f32,
         out: &mut Vec<EdgeSegment>,
     ) -> FrameEdgeStats {
-        let n = self.meshes.len();
-        let current: Vec<Affine3A> = (0..n).map(|o| transforms.get(o).copied().unwrap_or(self.defaults[o])).collect();
-        let moved: Vec<bool> =
-            (0..n).map(|o| self.first_frame || current[o] != self.transforms[o]).collect();
-        let objects_moved = if self.first_frame { 0 } else { moved.iter().filter(|m| **m).count() as u32 };
-        self.transforms = current;
         let first = out.len();
-        let mut stats = FrameEdgeStats { objects_moved, ..Default::default() };
+        let objects_moved = self.set_transforms(transforms);
+        let (find_ms, objects_in_view) = self.geometric_edges(eye, view, sharp_cutoff_degrees, out);
+        let (shadow, shadow_ms, output_ms) = self.shadow_edges(triples, view, out);
+        FrameEdgeStats {
+            find_ms,
+            shadow_ms,
+            output_ms,
+            objects_in_view,
+            objects_moved,
+            counts: EdgeCounts::of(&out[first..]),
+            shadow,
+        }
+    }
 
-        // Geometric edges of the objects in view.
+    /// Takes this frame's object transforms (`transforms[o]`, missing entries: the scene's
+    /// default); objects whose transform changed since the last call are moved for the next
+    /// [`Self::shadow_edges`]. Returns how many moved.
+    pub fn set_transforms(&mut self, transforms: &[Affine3A]) -> u32 {
+        let mut moved = 0;
+        for o in 0..self.meshes.len() {
+            let t = transforms.get(o).copied().unwrap_or(self.defaults[o]);
+            if t != self.transforms[o] {
+                self.transforms[o] = t;
+                self.moved[o] = true;
+                moved += 1;
+            }
+        }
+        moved
+    }
+
+    fn in_view(&self, view: Option<&ViewVolume>) -> Vec<bool> {
+        (0..self.meshes.len())
+            .map(|o| {
+                view.is_none_or(|v| {
+                    let (lo, hi) = world_box(&self.transforms[o], self.meshes[o].bounds);
+                    v.may_see(lo, hi)
+                })
+            })
+            .collect()
+    }
+
+    /// Appends the silhouettes, forward-facing sharp edges and boundary edges of every object
+    /// in `view` seen from world-space `eye`. Returns (milliseconds, objects in view).
+    pub fn geometric_edges(
+        &mut self,
+        eye: Vec3,
+        view: Option<&ViewVolume>,
+        sharp_cutoff_degrees: f32,
+        out: &mut Vec<EdgeSegment>,
+    ) -> (f64, u32) {
         let t = Instant::now();
         let cos = sharp_cutoff_degrees.to_radians().cos();
         if self.cos_cutoff != Some(cos) {
@@ -192,20 +237,14 @@ impl EdgeFinder {
             });
             self.cos_cutoff = Some(cos);
         }
-        let in_view: Vec<bool> = (0..n)
-            .map(|o| {
-                view.is_none_or(|v| {
-                    let (lo, hi) = world_box(&self.transforms[o], self.meshes[o].bounds);
-                    v.may_see(lo, hi)
-                })
-            })
-            .collect();
+        let in_view = self.in_view(view);
+        let mut seen = 0;
         let (found, scratch) = &mut self.scratch;
-        for o in 0..n {
-            if !in_view[o] {
+        for (o, &visible) in in_view.iter().enumerate() {
+            if !visible {
                 continue;
             }
-            stats.objects_in_view += 1;
+            seen += 1;
             let to_world = self.transforms[o];
             let eye_obj = to_world.inverse().transform_point3(eye);
             found.clear();
@@ -221,9 +260,18 @@ impl EdgeFinder {
                 }
             }));
         }
-        stats.find_ms = t.elapsed().as_secs_f64() * 1e3;
+        (t.elapsed().as_secs_f64() * 1e3, seen)
+    }
 
-        // Shadow edges.
+    /// Brings the shadow store up to date with `triples` (the whole current set) and the
+    /// moves since the last call, and appends the shadow edges on receivers in `view`.
+    /// Returns (what the update did, its milliseconds, milliseconds copying edges out).
+    pub fn shadow_edges(
+        &mut self,
+        triples: impl IntoIterator<Item = TripleKey>,
+        view: Option<&ViewVolume>,
+        out: &mut Vec<EdgeSegment>,
+    ) -> (ShadowUpdateStats, f64, f64) {
         let t = Instant::now();
         let scene = ShadowScene {
             meshes: &self.meshes,
@@ -233,15 +281,14 @@ impl EdgeFinder {
             lights: &self.lights,
             transforms: &self.transforms,
         };
-        stats.shadow = self.store.update(&scene, triples, &moved, &self.light_moved);
+        let stats = self.store.update(&scene, triples, &self.moved, &self.light_moved);
         self.light_moved.iter_mut().for_each(|m| *m = false);
-        self.first_frame = false;
-        stats.shadow_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.moved.iter_mut().for_each(|m| *m = false);
+        let shadow_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
+        let in_view = self.in_view(view);
         self.store.append(out, |o| in_view.get(o as usize).copied().unwrap_or(false));
-        stats.output_ms = t.elapsed().as_secs_f64() * 1e3;
-        stats.counts = EdgeCounts::of(&out[first..]);
-        stats
+        (stats, shadow_ms, t.elapsed().as_secs_f64() * 1e3)
     }
 
     /// The shadow store (for inspection and benchmarks).

@@ -34,6 +34,11 @@ use glam::{Affine3A, DAffine3, DMat3, DVec3};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
+use std::time::Instant;
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
 
 /// The scene as the shadow store needs it (all per object, indexed by object id).
 #[derive(Clone, Copy)]
@@ -49,8 +54,14 @@ pub struct ShadowScene<'a> {
 }
 
 /// What one update did.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ShadowUpdateStats {
+    /// Finding events (ms).
+    pub events_ms: f64,
+    /// Searching intersections (ms).
+    pub search_ms: f64,
+    /// 1D clipping (ms).
+    pub clip_ms: f64,
     /// Light–blocker pairs in the store.
     pub pairs: usize,
     /// Pairs whose events were (re)computed.
@@ -63,6 +74,18 @@ pub struct ShadowUpdateStats {
     pub events_clipped: usize,
     /// Shadow-edge segments stored after the update.
     pub segments: usize,
+    /// Face-hierarchy nodes and leaves the searches visited, and faces they cut.
+    pub nodes_visited: u64,
+    pub leaves_visited: u64,
+    pub faces_cut: u64,
+}
+
+impl ShadowUpdateStats {
+    fn add_search(&mut self, c: [u64; 3]) {
+        self.nodes_visited += c[0];
+        self.leaves_visited += c[1];
+        self.faces_cut += c[2];
+    }
 }
 
 #[derive(Debug, Clone, Default)]
@@ -114,33 +137,39 @@ fn own_faces(mesh: &Mesh, rings: Option<&VertexRings>, ev: &ShadowEvent) -> Vec<
     }
 }
 
-/// The pieces every event of `events` (blocker `blocker`) cuts from participant `obj`.
-fn compute_part(scene: &ShadowScene, blocker: u32, events: &[ShadowEvent], obj: u32, receiver: bool) -> Part {
+/// The pieces every event of `events` (blocker `blocker`) cuts from participant `obj`, and
+/// the search's (nodes, leaves, faces cut).
+fn compute_part(scene: &ShadowScene, blocker: u32, events: &[ShadowEvent], obj: u32, receiver: bool) -> (Part, [u64; 3]) {
     let tb = daffine(&scene.transforms[blocker as usize]);
     let to_obj =
         if obj == blocker { DAffine3::IDENTITY } else { daffine(&scene.transforms[obj as usize]).inverse() * tb };
     let bvh = &scene.bvhs[obj as usize];
     let mesh = &scene.meshes[blocker as usize];
     let rings = scene.rings[blocker as usize].as_ref();
-    let per: Vec<Vec<Piece>> = events
+    let per: Vec<(Vec<Piece>, [u64; 3])> = events
         .par_iter()
         .map_init(SearchScratch::default, |scratch, ev| {
             let mut out = Vec::new();
+            scratch.counts = [0; 3];
             if let Some(w) = Wedge::new(ev, &to_obj) {
                 let exclude = if obj == blocker { own_faces(mesh, rings, ev) } else { Vec::new() };
                 search(bvh, &w, &exclude, &mut out, scratch);
             }
-            out
+            (out, scratch.counts)
         })
         .collect();
     let mut off = Vec::with_capacity(events.len() + 1);
-    let mut pieces = Vec::with_capacity(per.iter().map(Vec::len).sum());
+    let mut pieces = Vec::with_capacity(per.iter().map(|p| p.0.len()).sum());
+    let mut counts = [0u64; 3];
     off.push(0);
-    for p in per {
+    for (p, c) in per {
         pieces.extend(p);
         off.push(pieces.len() as u32);
+        for k in 0..3 {
+            counts[k] += c[k];
+        }
     }
-    Part { receiver, off, pieces }
+    (Part { receiver, off, pieces }, counts)
 }
 
 /// Clips event `i` of a pair: the visible shadow edges on its receivers, in world space.
@@ -215,22 +244,30 @@ impl ShadowStore {
             if fresh {
                 let mesh = &scene.meshes[b as usize];
                 let local = LocalLight::new(&scene.lights[l as usize], &scene.transforms[b as usize]);
+                let t = Instant::now();
                 pair.events = find_events(mesh, &scene.trees[b as usize], scene.rings[b as usize].as_ref(), &local);
+                stats.events_ms += ms(t);
                 stats.pairs_recomputed += 1;
                 stats.events_found += pair.events.len();
                 pair.parts.clear();
                 let mut objs: BTreeSet<u32> = receivers.clone();
                 objs.insert(b);
+                let t = Instant::now();
                 for o in objs {
-                    pair.parts.insert(o, compute_part(scene, b, &pair.events, o, receivers.contains(&o)));
+                    let (part, c) = compute_part(scene, b, &pair.events, o, receivers.contains(&o));
+                    pair.parts.insert(o, part);
                     stats.intersections += pair.events.len();
+                    stats.add_search(c);
                 }
+                stats.search_ms += ms(t);
                 let parts = &pair.parts;
                 let events = &pair.events;
+                let t = Instant::now();
                 pair.visible = (0..events.len())
                     .into_par_iter()
                     .map_init(Default::default, |s, i| clip_event(&events[i], i, parts, &world, s))
                     .collect();
+                stats.clip_ms += ms(t);
                 stats.events_clipped += events.len();
                 continue;
             }
@@ -262,25 +299,30 @@ impl ShadowStore {
             // Moved participants and new receivers.
             let mut todo: Vec<u32> = pair.parts.keys().copied().filter(|&o| is(moved, o)).collect();
             todo.extend(receivers.iter().copied().filter(|o| !pair.parts.contains_key(o)));
+            let t = Instant::now();
             for o in todo {
                 if let Some(old) = pair.parts.get(&o) {
                     mark(old, &mut dirty);
                 }
-                let part = compute_part(scene, b, &pair.events, o, receivers.contains(&o));
+                let (part, c) = compute_part(scene, b, &pair.events, o, receivers.contains(&o));
                 stats.intersections += ne;
+                stats.add_search(c);
                 mark(&part, &mut dirty);
                 pair.parts.insert(o, part);
             }
+            stats.search_ms += ms(t);
             let idx: Vec<usize> = (0..ne).filter(|&i| dirty[i]).collect();
             if idx.is_empty() {
                 continue;
             }
             let parts = &pair.parts;
             let events = &pair.events;
+            let t = Instant::now();
             let redone: Vec<(usize, Vec<EdgeSegment>)> = idx
                 .par_iter()
                 .map_init(Default::default, |s, &i| (i, clip_event(&events[i], i, parts, &world, s)))
                 .collect();
+            stats.clip_ms += ms(t);
             stats.events_clipped += redone.len();
             for (i, v) in redone {
                 pair.visible[i] = v;

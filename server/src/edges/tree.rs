@@ -239,20 +239,22 @@ pub struct EdgeTree {
 /// Trees with more edges than this answer queries in parallel.
 const PARALLEL_QUERY_EDGES: usize = 200_000;
 
-/// Deepest a tree may get: past this depth nodes split at the median of their edge list
-/// (traversal stacks are sized from it).
+/// Past this depth nodes split their edge list in halves, so a tree is at most this deep
+/// plus 32 levels (traversal stacks are sized from it).
 const MAX_DEPTH: usize = 60;
+const STACK: usize = MAX_DEPTH + 40;
 /// Nodes with more edges than this build their two children in parallel.
 const PARALLEL_ITEMS: usize = 1 << 14;
 const BINS: usize = 16;
 
-/// Build-time edge: the boxes of its normals and of its end points.
+/// Build-time edge: the boxes of its normals and of its end points (four-lane vectors, so
+/// the binning's min/max run four wide).
 #[derive(Debug, Clone, Copy)]
 struct Item {
-    nlo: Vec3,
-    nhi: Vec3,
-    plo: Vec3,
-    phi: Vec3,
+    nlo: Vec3A,
+    nhi: Vec3A,
+    plo: Vec3A,
+    phi: Vec3A,
     edge: u32,
 }
 
@@ -269,18 +271,18 @@ impl Item {
 
 #[derive(Debug, Clone, Copy)]
 struct Bounds {
-    nlo: Vec3,
-    nhi: Vec3,
-    plo: Vec3,
-    phi: Vec3,
+    nlo: Vec3A,
+    nhi: Vec3A,
+    plo: Vec3A,
+    phi: Vec3A,
 }
 
 impl Bounds {
     const EMPTY: Bounds = Bounds {
-        nlo: Vec3::splat(f32::INFINITY),
-        nhi: Vec3::splat(f32::NEG_INFINITY),
-        plo: Vec3::splat(f32::INFINITY),
-        phi: Vec3::splat(f32::NEG_INFINITY),
+        nlo: Vec3A::splat(f32::INFINITY),
+        nhi: Vec3A::splat(f32::NEG_INFINITY),
+        plo: Vec3A::splat(f32::INFINITY),
+        phi: Vec3A::splat(f32::NEG_INFINITY),
     };
     #[inline(always)]
     fn grow(&mut self, it: &Item) {
@@ -368,25 +370,13 @@ struct Ctx<'a> {
     progress: &'a dyn Progress,
 }
 
-/// In-place partition: items satisfying `pred` first; returns their count.
-fn partition(items: &mut [Item], pred: impl Fn(&Item) -> bool) -> usize {
-    let mut i = 0;
-    for j in 0..items.len() {
-        if pred(&items[j]) {
-            items.swap(i, j);
-            i += 1;
-        }
-    }
-    i
-}
-
 fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
 }
 
-/// The best (axis, bin boundary) to split at, or `None` when no candidate separates the
-/// items (all keys equal).
-fn choose_split(items: &[Item], s: &Summary, ctx: &Ctx) -> Option<(usize, usize)> {
+/// The best (axis, bin boundary) to split the items that do not stay (`stays`) at, or `None`
+/// when no candidate separates them (all keys equal); and how many stay.
+fn choose_split(items: &[Item], s: &Summary, stays: &(impl Fn(&Item) -> bool + Sync), ctx: &Ctx) -> (Option<(usize, usize)>, usize) {
     let scales: [f32; 6] = std::array::from_fn(|a| {
         let w = s.chi[a] - s.clo[a];
         if w > 0.0 && w.is_finite() {
@@ -395,10 +385,21 @@ fn choose_split(items: &[Item], s: &Summary, ctx: &Ctx) -> Option<(usize, usize)
             0.0
         }
     });
-    let axes = ctx.axes.clone();
-    let fill = |bins: &mut Bins, chunk: &[Item]| {
+    // Candidate axes: the three whose keys spread widest, in the units of the cost (position
+    // spread over the viewing distance). Splitting along a narrow axis rarely wins, and
+    // binning half the axes halves the build.
+    let mut axes: Vec<usize> = ctx.axes.clone().filter(|&a| scales[a] > 0.0).collect();
+    let spread = |a: usize| (s.chi[a] - s.clo[a]) * if a < 3 { 1.0 } else { ctx.inv_d };
+    axes.sort_by(|&x, &y| spread(y).total_cmp(&spread(x)));
+    axes.truncate(3);
+    let axes = &axes;
+    let fill = |bins: &mut Bins, stayed: &mut usize, chunk: &[Item]| {
         for it in chunk {
-            for a in axes.clone() {
+            if stays(it) {
+                *stayed += 1;
+                continue;
+            }
+            for &a in axes {
                 if scales[a] > 0.0 {
                     let k = bin_of(it.centroid(a), s.clo[a], scales[a]);
                     bins[a][k].b.grow(it);
@@ -407,36 +408,33 @@ fn choose_split(items: &[Item], s: &Summary, ctx: &Ctx) -> Option<(usize, usize)
             }
         }
     };
-    let bins: Bins = if items.len() > PARALLEL_ITEMS {
+    let (bins, stayed): (Bins, usize) = if items.len() > PARALLEL_ITEMS {
         items
             .par_chunks(PARALLEL_ITEMS / 2)
             .map(|c| {
-                let mut b = EMPTY_BINS;
-                fill(&mut b, c);
-                b
+                let (mut b, mut n) = (EMPTY_BINS, 0);
+                fill(&mut b, &mut n, c);
+                (b, n)
             })
             .reduce(
-                || EMPTY_BINS,
-                |mut x, y| {
+                || (EMPTY_BINS, 0),
+                |(mut x, nx), (y, ny)| {
                     for a in 0..6 {
                         for k in 0..BINS {
                             x[a][k].b.merge(&y[a][k].b);
                             x[a][k].count += y[a][k].count;
                         }
                     }
-                    x
+                    (x, nx + ny)
                 },
             )
     } else {
-        let mut b = EMPTY_BINS;
-        fill(&mut b, items);
-        b
+        let (mut b, mut n) = (EMPTY_BINS, 0);
+        fill(&mut b, &mut n, items);
+        (b, n)
     };
     let mut best: Option<(f32, usize, usize)> = None;
-    for a in ctx.axes.clone() {
-        if scales[a] == 0.0 {
-            continue;
-        }
+    for &a in axes {
         // Suffix extents, then sweep the prefix.
         let mut right = [(Bounds::EMPTY, 0u32); BINS];
         let mut acc = (Bounds::EMPTY, 0u32);
@@ -459,7 +457,7 @@ fn choose_split(items: &[Item], s: &Summary, ctx: &Ctx) -> Option<(usize, usize)
             }
         }
     }
-    best.map(|(_, a, k)| (a, k))
+    (best.map(|(_, a, k)| (a, k)), stayed)
 }
 
 impl EdgeTree {
@@ -473,6 +471,7 @@ impl EdgeTree {
                 let e = &mesh.edges[i as usize];
                 let (a, b) = (pos[e.v[0] as usize], pos[e.v[1] as usize]);
                 let (n0, n1) = (e.normals[0], e.normals[1]);
+                let (n0, n1, a, b) = (Vec3A::from(n0), Vec3A::from(n1), Vec3A::from(a), Vec3A::from(b));
                 Item { nlo: n0.min(n1), nhi: n0.max(n1), plo: a.min(b), phi: a.max(b), edge: i }
             })
             .collect();
@@ -487,7 +486,8 @@ impl EdgeTree {
         let ctx = Ctx { params, inv_d, axes, progress };
         let mut nodes = Vec::with_capacity(items.len() / params.leaf_size.max(1) * 2 + 1);
         if !items.is_empty() {
-            build_node(&mut items, 0, 0, &mut nodes, &ctx);
+            let sum = summarize(&items);
+            build_node(&mut items, 0, 0, &mut nodes, &ctx, sum);
         }
         let record = |it: &Item| {
             let e = &mesh.edges[it.edge as usize];
@@ -519,7 +519,7 @@ impl EdgeTree {
     /// [`PIPELINE`] nodes later, by which time their cache lines have arrived.
     #[inline]
     fn traverse_from(&self, root: u32, mut enter: impl FnMut(&Node) -> Visit, mut blocks: impl FnMut(&[Block], bool)) {
-        let mut stack = [0u32; MAX_DEPTH + 8];
+        let mut stack = [0u32; STACK];
         stack[0] = root;
         let mut sp = 1;
         let mut queue = [(0u32, 0u32, false); PIPELINE];
@@ -804,67 +804,107 @@ fn node_from(b: &Bounds, start: usize, stored: usize, end: usize) -> Node {
 /// its nodes to `nodes` in depth-first order, the subtree's root first. Progress is
 /// reported per sequential chunk (nodes of at most [`PARALLEL_ITEMS`] edges) and for edges
 /// stored at the big nodes above them, so reporting costs nothing measurable.
-fn build_node(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx) {
+fn build_node(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx, sum: Summary) {
     let n = items.len();
     let big = n > PARALLEL_ITEMS;
-    build_rec(items, start, depth, nodes, ctx);
+    build_rec(items, start, depth, nodes, ctx, sum);
     if !big {
         ctx.progress.advance(n as u64);
     }
 }
 
-fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx) {
+/// Three-way partition: class 0 first, then 1, then 2; returns the counts of classes 0 and
+/// 1 and the summaries of classes 1 and 2 (one pass).
+fn partition3(items: &mut [Item], class: impl Fn(&Item) -> u8) -> (usize, usize, Summary, Summary) {
+    let (mut lo, mut mid, mut hi) = (0usize, 0usize, items.len());
+    let (mut s1, mut s2) = (Summary::EMPTY, Summary::EMPTY);
+    while mid < hi {
+        match class(&items[mid]) {
+            0 => {
+                items.swap(lo, mid);
+                lo += 1;
+                mid += 1;
+            }
+            1 => {
+                s1.grow(&items[mid]);
+                mid += 1;
+            }
+            _ => {
+                hi -= 1;
+                s2.grow(&items[mid]);
+                items.swap(mid, hi);
+            }
+        }
+    }
+    (lo, mid - lo, s1, s2)
+}
+
+/// One node: `sum` summarises `items`. Two passes over the items per node: binning (which
+/// also counts the edges that stay) and a three-way partition (stay / left / right) that
+/// also summarises the two children.
+fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx, sum: Summary) {
     let n = items.len();
     let big = n > PARALLEL_ITEMS;
-    let all = summarize(items);
     let me = nodes.len();
     let leaf = ctx.params.leaf_size.max(1);
     if n <= leaf {
-        nodes.push(node_from(&all.b, start, n, start + n));
+        nodes.push(node_from(&sum.b, start, n, start + n));
         return;
     }
-    // Sharp edges higher: edges spanning more than `stay_fraction` of the node's normal
-    // range on some axis stay here.
-    let stored = match ctx.params.stay_fraction {
-        Some(f) => {
-            let w = (all.b.nhi - all.b.nlo) * f;
-            partition(items, |it| (it.nhi - it.nlo).cmpgt(w).any())
-        }
-        None => 0,
-    };
-    let rest = &mut items[stored..];
-    if rest.len() <= leaf {
-        // What is left fits a leaf: store it here too.
-        nodes.push(node_from(&all.b, start, n, start + n));
+    // Sharp edges higher: an edge spanning more than `stay_fraction` of the node's normal
+    // range on some axis stays here.
+    let w = (sum.b.nhi - sum.b.nlo) * ctx.params.stay_fraction.unwrap_or(f32::INFINITY);
+    let stays = |it: &Item| ctx.params.stay_fraction.is_some() && (it.nhi - it.nlo).cmpgt(w).any();
+    let (split, stored) = if depth >= MAX_DEPTH { (None, 0) } else { choose_split(items, &sum, &stays, ctx) };
+    if n - stored <= leaf || depth >= MAX_DEPTH && n <= 4 * leaf {
+        // What is left fits a leaf: store it all here.
+        nodes.push(node_from(&sum.b, start, n, start + n));
         if big {
             ctx.progress.advance(n as u64);
         }
         return;
     }
+    let (stored, nl, ls, rs) = match split {
+        Some((axis, k)) => {
+            let scale = BINS as f32 / (sum.chi[axis] - sum.clo[axis]) * (1.0 - 1e-6);
+            let lo = sum.clo[axis];
+            partition3(items, |it| {
+                if stays(it) {
+                    0
+                } else if bin_of(it.centroid(axis), lo, scale) < k {
+                    1
+                } else {
+                    2
+                }
+            })
+        }
+        None => {
+            // No key separates the rest (or too deep): stays first, then halves by index.
+            let (st, _, _, _) = partition3(items, |it| if stays(it) { 0 } else { 1 });
+            let half = (n - st) / 2;
+            let (l, r) = items[st..].split_at(half);
+            (st, half, summarize(l), summarize(r))
+        }
+    };
+    let (stored, nl, ls, rs) = if nl == 0 || nl == n - stored {
+        // A degenerate split (possible when keys collide at a bin edge): halve by index.
+        let half = (n - stored) / 2;
+        let (l, r) = items[stored..].split_at(half);
+        (stored, half, summarize(l), summarize(r))
+    } else {
+        (stored, nl, ls, rs)
+    };
     if big {
         ctx.progress.advance(stored as u64);
     }
-    let rs = if stored == 0 { all } else { summarize(rest) };
-    let split = if depth >= MAX_DEPTH { None } else { choose_split(rest, &rs, ctx) };
-    let mut mid = match split {
-        Some((axis, k)) => {
-            let scale = BINS as f32 / (rs.chi[axis] - rs.clo[axis]) * (1.0 - 1e-6);
-            let lo = rs.clo[axis];
-            partition(rest, |it| bin_of(it.centroid(axis), lo, scale) < k)
-        }
-        None => rest.len() / 2,
-    };
-    if mid == 0 || mid == rest.len() {
-        mid = rest.len() / 2;
-    }
-    nodes.push(node_from(&all.b, start, stored, start + n));
-    let (left, right) = rest.split_at_mut(mid);
-    let (ls, rstart) = (start + stored, start + stored + mid);
+    nodes.push(node_from(&sum.b, start, stored, start + n));
+    let (left, right) = items[stored..].split_at_mut(nl);
+    let (lstart, rstart) = (start + stored, start + stored + nl);
     if big {
         let (mut lv, mut rv) = (Vec::new(), Vec::new());
         rayon::join(
-            || build_node(left, ls, depth + 1, &mut lv, ctx),
-            || build_node(right, rstart, depth + 1, &mut rv, ctx),
+            || build_node(left, lstart, depth + 1, &mut lv, ctx, ls),
+            || build_node(right, rstart, depth + 1, &mut rv, ctx, rs),
         );
         let base = nodes.len() as u32;
         let shift = |v: &mut Vec<Node>, by: u32| {
@@ -881,9 +921,9 @@ fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Nod
         nodes[me].right = rbase;
         nodes.append(&mut rv);
     } else {
-        build_rec(left, ls, depth + 1, nodes, ctx);
+        build_rec(left, lstart, depth + 1, nodes, ctx, ls);
         nodes[me].right = nodes.len() as u32;
-        build_rec(right, rstart, depth + 1, nodes, ctx);
+        build_rec(right, rstart, depth + 1, nodes, ctx, rs);
     }
 }
 

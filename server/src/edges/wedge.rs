@@ -20,7 +20,7 @@
 //! unvisited node lies farther: only the first surface along each ray matters for the 1D
 //! clipping of [`super::clip1d`], so a wedge costs about what a ray costs.
 use super::events::{Generator, ShadowEvent};
-use super::face_bvh::{FaceBvh, FaceNode};
+use super::face_bvh::{Child, FaceBvh};
 use glam::{DAffine3, DVec2, DVec3, Vec3};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -187,9 +187,9 @@ impl Wedge {
 
     /// Lower bound of `μ` over a box, and whether the box can meet the wedge at all
     /// (straddles the plane and overlaps the wedge's region).
-    fn node_bound(&self, n: &FaceNode) -> Option<f64> {
-        let lo = Vec3::from(n.lo).as_dvec3();
-        let hi = Vec3::from(n.hi).as_dvec3();
+    fn node_bound(&self, lo: &[f32; 3], hi: &[f32; 3]) -> Option<f64> {
+        let lo = Vec3::from(*lo).as_dvec3();
+        let hi = Vec3::from(*hi).as_dvec3();
         let centre = (lo + hi) * 0.5 - self.c;
         let half = (hi - lo) * 0.5;
         let range = |g: DVec3| {
@@ -243,9 +243,10 @@ fn clip_halfplanes(a: DVec2, b: DVec2, planes: &[(DVec2, f64)]) -> Option<(DVec2
     Some((a + d * t0, a + d * t1))
 }
 
-/// A heap entry: a node and a lower bound of `μ` over it.
+/// A heap entry: a lower bound of `μ` over a subtree, and the subtree (a node index, or
+/// a leaf's first face and face count; count 0 marks a node).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Entry(f64, u32);
+pub struct Entry(f64, u32, u32);
 impl Eq for Entry {}
 impl PartialOrd for Entry {
     fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
@@ -255,7 +256,17 @@ impl PartialOrd for Entry {
 impl Ord for Entry {
     fn cmp(&self, o: &Self) -> Ordering {
         // Min-heap on μ.
-        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1)).then(o.2.cmp(&self.2))
+    }
+}
+
+impl Entry {
+    fn of(mu: f64, c: Child) -> Option<Entry> {
+        match c {
+            Child::Node(i) => Some(Entry(mu, i, 0)),
+            Child::Leaf { start, count } => Some(Entry(mu, start, count)),
+            Child::Empty => None,
+        }
     }
 }
 
@@ -289,60 +300,92 @@ pub fn faces_light(n: Vec3, p: Vec3, lights: &[DVec3; 2]) -> bool {
 /// `exclude` lists (sorted) mesh faces to ignore: the faces touching the event's blocker
 /// edge or vertex when the receiver is the blocker itself.
 pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece>, scratch: &mut SearchScratch) {
-    if bvh.nodes.is_empty() {
-        return;
-    }
+    let Some((root, lo, hi, nlo, nhi)) = bvh.root else { return };
     let lights = wedge.light_points();
     let cull = bvh.closed;
-    let heap = &mut scratch.heap;
-    let cov = &mut scratch.cov;
+    let SearchScratch { heap, cov, counts } = scratch;
     heap.clear();
     cov.clear();
-    let root = &bvh.nodes[0];
-    if let Some(m) = wedge.node_bound(root) {
-        heap.push(Entry(m, 0));
+    if cull && !may_face(&nlo, &nhi, &lo, &hi, &lights) {
+        return;
     }
+    if let Some(e) = wedge.node_bound(&lo, &hi).and_then(|m| Entry::of(m, root)) {
+        heap.push(e);
+    }
+    // Farthest μ of the pieces found so far, and whether they were seen to cover every
+    // ray (checked only when the search reaches that depth: the test sorts the intervals).
     let mut far = f64::NEG_INFINITY;
-    let mut covered = false;
-    while let Some(Entry(mu, i)) = heap.pop() {
-        if covered && mu >= far {
-            break;
+    let mut dirty = false;
+    while let Some(Entry(mu, i, count)) = heap.pop() {
+        counts[0] += 1;
+        if dirty && mu >= far {
+            dirty = false;
+            if covers_unit(cov) {
+                break;
+            }
         }
-        let node = &bvh.nodes[i as usize];
-        if cull && !may_face(&node.nlo, &node.nhi, &node.lo, &node.hi, &lights) {
+        if count == 0 {
+            // A node: test its children's boxes (one cache line) and push the survivors.
+            let node = &bvh.nodes[i as usize];
+            for k in 0..2 {
+                let c = node.child(k);
+                if c == Child::Empty {
+                    continue;
+                }
+                let Some(m) = wedge.node_bound(&node.lo[k], &node.hi[k]) else { continue };
+                if cull {
+                    let nb = &bvh.normals[i as usize];
+                    if !may_face(&nb.lo[k], &nb.hi[k], &node.lo[k], &node.hi[k], &lights) {
+                        continue;
+                    }
+                }
+                if let Some(e) = Entry::of(m, c) {
+                    // Fetch what the entry will need while the heap works on others.
+                    match c {
+                        Child::Node(j) => prefetch(&bvh.nodes[j as usize]),
+                        Child::Leaf { start, .. } => prefetch(&bvh.faces[start as usize]),
+                        Child::Empty => {}
+                    }
+                    heap.push(e);
+                }
+            }
             continue;
         }
-        if node.is_leaf() {
-            let before = out.len();
-            for s in node.start as usize..node.end as usize {
-                if exclude.binary_search(&bvh.faces[s]).is_ok() {
-                    continue;
-                }
-                let t = &bvh.tris[s];
-                let facing = faces_light(bvh.normals[s], t[0], &lights);
-                if cull && !facing {
-                    continue;
-                }
-                if let Some((a, b)) = wedge.cut(t) {
-                    wedge.clip(a, b, facing, out);
-                }
+        counts[1] += 1;
+        let before = out.len();
+        for f in &bvh.faces[i as usize..(i + count) as usize] {
+            if exclude.binary_search(&f.id).is_ok() {
+                continue;
             }
-            if out.len() > before {
-                for p in &out[before..] {
-                    far = far.max(p.a.x + p.a.y).max(p.b.x + p.b.y);
-                    let (ua, ub) = (u_of(p.a), u_of(p.b));
-                    cov.push((ua.min(ub), ua.max(ub)));
-                }
-                covered = covers_unit(cov);
+            let facing = faces_light(f.n, f.v[0], &lights);
+            if cull && !facing {
+                continue;
             }
-        } else {
-            for c in [i + 1, node.right] {
-                if let Some(m) = wedge.node_bound(&bvh.nodes[c as usize]) {
-                    heap.push(Entry(m, c));
-                }
+            if let Some((a, b)) = wedge.cut(&f.v) {
+                counts[2] += 1;
+                wedge.clip(a, b, facing, out);
             }
         }
+        if out.len() > before {
+            for p in &out[before..] {
+                far = far.max(p.a.x + p.a.y).max(p.b.x + p.b.y);
+                let (ua, ub) = (u_of(p.a), u_of(p.b));
+                cov.push((ua.min(ub), ua.max(ub)));
+            }
+            dirty = true;
+        }
     }
+}
+
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching is a hint; the address is valid.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch(x as *const T as *const i8, std::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
 }
 
 /// Reusable allocations of [`search`].
@@ -350,6 +393,8 @@ pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece
 pub struct SearchScratch {
     heap: BinaryHeap<Entry>,
     cov: Vec<(f64, f64)>,
+    /// Nodes visited, leaves visited and faces cut, summed over searches.
+    pub counts: [u64; 3],
 }
 
 /// Ray parameter of a canonical point.
