@@ -506,7 +506,7 @@ fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
             moved_total += 1;
         }
         // A random subset of the triples (some appear, some go).
-        let triples: Vec<TripleKey> = all.iter().copied().filter(|_| rng.next() % 4 != 0).collect();
+        let triples: Vec<TripleKey> = all.iter().copied().filter(|_| !rng.next().is_multiple_of(4)).collect();
         let got = live.frame(&t, &triples);
         recomputed += live.last.shadow.events_clipped;
         let st = live.last.shadow;

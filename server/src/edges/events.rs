@@ -451,7 +451,7 @@ mod tests {
         // silhouette edge/vertex of the box takes part, so there are both VE and EV events
         // of both labels.
         let m = cube(Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 1.0, 0.5));
-        let light = square_light(3.0, 1.0, 0.5236);
+        let light = square_light(3.0, 1.0, std::f32::consts::FRAC_PI_6);
         let trees = MeshEdgeTrees::build(&m, &NoProgress);
         let rings = VertexRings::build(&m);
         let ev = find_events(&m, &trees, Some(&rings), &light);

@@ -62,12 +62,22 @@ pub struct Face {
     pub id: u32,
 }
 
+/// The root of a [`FaceBvh`] and its corner and normal boxes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Root {
+    pub child: Child,
+    pub lo: [f32; 3],
+    pub hi: [f32; 3],
+    pub nlo: [f32; 3],
+    pub nhi: [f32; 3],
+}
+
 #[derive(Debug, Clone, Default)]
 pub struct FaceBvh {
     pub nodes: Vec<FaceNode>,
     pub normals: Vec<NormalBoxes>,
-    /// The root: a node, a leaf (small meshes) or empty; with its boxes.
-    pub root: Option<(Child, [f32; 3], [f32; 3], [f32; 3], [f32; 3])>,
+    /// The root: a node or (small meshes) a leaf, with its boxes; `None` for no faces.
+    pub root: Option<Root>,
     pub faces: Vec<Face>,
     /// The mesh is closed (no boundary edge): the first surface a ray from outside meets
     /// faces it, so faces turned away from the light can never bound a shadow or hide one.
@@ -109,7 +119,7 @@ impl FaceBvh {
         let mut normals = Vec::with_capacity(items.len() / 2 + 1);
         let root = (!items.is_empty()).then(|| {
             let b = build(&mut items, 0, &mut nodes, &mut normals, progress);
-            (b.child, b.lo.to_array(), b.hi.to_array(), b.nlo.to_array(), b.nhi.to_array())
+            Root { child: b.child, lo: b.lo.to_array(), hi: b.hi.to_array(), nlo: b.nlo.to_array(), nhi: b.nhi.to_array() }
         });
         let faces = items
             .par_iter()
@@ -243,9 +253,9 @@ mod tests {
         meshes.push((*edgepoint_scene::builtin::load("torus-capsule").unwrap().objects[2].mesh).clone());
         for m in &meshes {
             let b = FaceBvh::build(m, &NoProgress);
-            let (c, lo, hi, nlo, nhi) = b.root.unwrap();
+            let r = b.root.unwrap();
             let mut seen = Vec::new();
-            check(&b, c, lo, hi, nlo, nhi, &mut seen);
+            check(&b, r.child, r.lo, r.hi, r.nlo, r.nhi, &mut seen);
             seen.sort_unstable();
             assert!(seen.iter().enumerate().all(|(i, &f)| i as u32 == f) && seen.len() == m.triangles.len());
             assert_eq!(b.closed, m.boundary_edges() == 0);

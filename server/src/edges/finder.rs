@@ -112,12 +112,12 @@ impl EdgeFinder {
         let faces: usize = meshes.iter().map(|m| m.triangles.len()).sum();
         let t = Instant::now();
         progress.begin("edge trees", edges as u64);
-        let trees: Vec<MeshEdgeTrees> = meshes.iter().map(|m| MeshEdgeTrees::build(m, progress)).collect();
+        let trees: Vec<MeshEdgeTrees> = meshes.par_iter().map(|m| MeshEdgeTrees::build(m, progress)).collect();
         progress.end();
         let edge_trees_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         progress.begin("receiver hierarchies", faces as u64);
-        let bvhs: Vec<FaceBvh> = meshes.iter().map(|m| FaceBvh::build(m, progress)).collect();
+        let bvhs: Vec<FaceBvh> = meshes.par_iter().map(|m| FaceBvh::build(m, progress)).collect();
         progress.end();
         let face_bvhs_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();

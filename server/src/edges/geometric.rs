@@ -50,6 +50,8 @@ impl MeshEdgeTrees {
             (0..mesh.edges.len() as u32).into_par_iter().filter(|&i| is_tree_edge(&mesh.edges[i as usize])).collect();
         let boundary: Vec<u32> = (0..mesh.edges.len() as u32).filter(|&i| mesh.edges[i as usize].is_boundary()).collect();
         let silhouette = EdgeTree::build(mesh, &interior, params, progress);
+        // Progress counts every edge of the mesh.
+        progress.advance((mesh.edges.len() - interior.len()) as u64);
         let mut by_fold = interior;
         let dot = |i: u32| {
             let e = &mesh.edges[i as usize];

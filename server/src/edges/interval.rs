@@ -82,18 +82,28 @@ impl Interval {
         Interval { lo: self.lo.min(o.lo), hi: self.hi.max(o.hi) }
     }
 
+}
+
+impl std::ops::Add for Interval {
+    type Output = Interval;
     #[inline(always)]
-    pub fn add(self, o: Interval) -> Interval {
+    fn add(self, o: Interval) -> Interval {
         Interval { lo: down(self.lo + o.lo), hi: up(self.hi + o.hi) }
     }
+}
 
+impl std::ops::Sub for Interval {
+    type Output = Interval;
     #[inline(always)]
-    pub fn sub(self, o: Interval) -> Interval {
+    fn sub(self, o: Interval) -> Interval {
         Interval { lo: down(self.lo - o.hi), hi: up(self.hi - o.lo) }
     }
+}
 
+impl std::ops::Mul for Interval {
+    type Output = Interval;
     #[inline(always)]
-    pub fn mul(self, o: Interval) -> Interval {
+    fn mul(self, o: Interval) -> Interval {
         let (a, b, c, d) = (self.lo * o.lo, self.lo * o.hi, self.hi * o.lo, self.hi * o.hi);
         Interval { lo: down(a.min(b).min(c.min(d))), hi: up(a.max(b).max(c.max(d))) }
     }
@@ -144,13 +154,13 @@ impl IVec3 {
 
     #[inline(always)]
     pub fn sub(&self, o: &IVec3) -> IVec3 {
-        IVec3 { x: self.x.sub(o.x), y: self.y.sub(o.y), z: self.z.sub(o.z) }
+        IVec3 { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
     }
 
     /// `self · o`, summed x, y, z in that order (as `glam::Vec3::dot`).
     #[inline(always)]
     pub fn dot(&self, o: &IVec3) -> Interval {
-        self.x.mul(o.x).add(self.y.mul(o.y)).add(self.z.mul(o.z))
+        (self.x * o.x + self.y * o.y) + self.z * o.z
     }
 
     /// `self · (e - p)` for every normal in `self`, eye in `e` and position in `p`: Equation 1
@@ -186,7 +196,7 @@ mod tests {
         }
         fn interval(&mut self) -> Interval {
             let (a, b) = (self.value(), self.value());
-            if self.next() % 5 == 0 {
+            if self.next().is_multiple_of(5) {
                 Interval::point(a)
             } else {
                 Interval::new(a.min(b), a.max(b))
@@ -218,11 +228,11 @@ mod tests {
             // f64 holds the exact sum/difference/product of two f32 values only up to
             // rounding; the product of two f32 is exact in f64, sums are exact unless the
             // exponents are more than 29 apart, where the f32 widening is far larger.
-            assert!(contains_exact(a.add(b), xd + yd), "{a:?}+{b:?} ∌ {x}+{y}");
-            assert!(contains_exact(a.sub(b), xd - yd), "{a:?}-{b:?} ∌ {x}-{y}");
-            assert!(contains_exact(a.mul(b), xd * yd), "{a:?}*{b:?} ∌ {x}*{y}");
+            assert!(contains_exact(a + b, xd + yd), "{a:?}+{b:?} ∌ {x}+{y}");
+            assert!(contains_exact(a - b, xd - yd), "{a:?}-{b:?} ∌ {x}-{y}");
+            assert!(contains_exact(a * b, xd * yd), "{a:?}*{b:?} ∌ {x}*{y}");
             // ... and the f32 evaluation of the same operation.
-            assert!(a.add(b).contains(x + y) && a.sub(b).contains(x - y) && a.mul(b).contains(x * y));
+            assert!((a + b).contains(x + y) && (a - b).contains(x - y) && (a * b).contains(x * y));
         }
     }
 

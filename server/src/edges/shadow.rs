@@ -30,7 +30,7 @@ use super::wedge::{search, Piece, SearchScratch, Wedge};
 use super::EdgeSegment;
 use crate::session::TripleKey;
 use edgepoint_scene::{Light, Mesh, NO_FACE};
-use glam::{Affine3A, DAffine3, DMat3, DVec3};
+use glam::{Affine3A, DAffine3, DMat3};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -119,7 +119,7 @@ pub struct ShadowStore {
 fn daffine(a: &Affine3A) -> DAffine3 {
     DAffine3 {
         matrix3: DMat3::from_cols(a.matrix3.x_axis.as_dvec3(), a.matrix3.y_axis.as_dvec3(), a.matrix3.z_axis.as_dvec3()),
-        translation: DVec3::from(a.translation.as_dvec3()),
+        translation: a.translation.as_dvec3(),
     }
 }
 
@@ -173,14 +173,18 @@ fn compute_part(scene: &ShadowScene, blocker: u32, events: &[ShadowEvent], obj: 
 }
 
 /// Clips event `i` of a pair: the visible shadow edges on its receivers, in world space.
-fn clip_event(
-    ev: &ShadowEvent,
-    i: usize,
-    parts: &BTreeMap<u32, Part>,
-    world: &DAffine3,
-    scratch: &mut (ClipScratch, Vec<Seg>, Vec<(u32, bool)>, Vec<Visible>),
-) -> Vec<EdgeSegment> {
-    let (cs, segs, tags, vis) = scratch;
+/// Reusable allocations of [`clip_event`].
+#[derive(Default)]
+struct ClipBuffers {
+    clip: ClipScratch,
+    segs: Vec<Seg>,
+    /// (participant, can show a shadow edge) per piece.
+    tags: Vec<(u32, bool)>,
+    visible: Vec<Visible>,
+}
+
+fn clip_event(ev: &ShadowEvent, i: usize, parts: &BTreeMap<u32, Part>, world: &DAffine3, buf: &mut ClipBuffers) -> Vec<EdgeSegment> {
+    let ClipBuffers { clip: cs, segs, tags, visible: vis } = buf;
     segs.clear();
     tags.clear();
     vis.clear();
@@ -265,7 +269,7 @@ impl ShadowStore {
                 let t = Instant::now();
                 pair.visible = (0..events.len())
                     .into_par_iter()
-                    .map_init(Default::default, |s, i| clip_event(&events[i], i, parts, &world, s))
+                    .map_init(ClipBuffers::default, |s, i| clip_event(&events[i], i, parts, &world, s))
                     .collect();
                 stats.clip_ms += ms(t);
                 stats.events_clipped += events.len();
@@ -320,7 +324,7 @@ impl ShadowStore {
             let t = Instant::now();
             let redone: Vec<(usize, Vec<EdgeSegment>)> = idx
                 .par_iter()
-                .map_init(Default::default, |s, &i| (i, clip_event(&events[i], i, parts, &world, s)))
+                .map_init(ClipBuffers::default, |s, &i| (i, clip_event(&events[i], i, parts, &world, s)))
                 .collect();
             stats.clip_ms += ms(t);
             stats.events_clipped += redone.len();

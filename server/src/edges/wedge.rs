@@ -71,7 +71,8 @@ impl Wedge {
         let m = d0.cross(d1);
         let m2 = m.length_squared();
         let scale = d0.length().max(d1.length());
-        if !(m2 > 0.0) || m2.sqrt() < 1e-12 * scale * scale {
+        // (NaN fails the first test too.)
+        if m2.is_nan() || m2 <= 0.0 || m2.sqrt() < 1e-12 * scale * scale {
             return None;
         }
         Some(Wedge {
@@ -300,7 +301,7 @@ pub fn faces_light(n: Vec3, p: Vec3, lights: &[DVec3; 2]) -> bool {
 /// `exclude` lists (sorted) mesh faces to ignore: the faces touching the event's blocker
 /// edge or vertex when the receiver is the blocker itself.
 pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece>, scratch: &mut SearchScratch) {
-    let Some((root, lo, hi, nlo, nhi)) = bvh.root else { return };
+    let Some(super::face_bvh::Root { child: root, lo, hi, nlo, nhi }) = bvh.root else { return };
     let lights = wedge.light_points();
     let cull = bvh.closed;
     let SearchScratch { heap, cov, counts } = scratch;
