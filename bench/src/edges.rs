@@ -75,32 +75,9 @@ pub struct EdgesArgs {
     pub json: bool,
 }
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        let x = self.0;
-        (x ^ (x >> 33)).wrapping_mul(0xff51afd7ed558ccd) ^ (x >> 29)
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 /// Random eyes around a mesh: uniform directions, 1.2 to 4 bounding radii from the centre.
 fn viewpoints(mesh: &Mesh, n: usize, seed: u64) -> Vec<Vec3> {
-    let (lo, hi) = mesh.bounds;
-    let c = (lo + hi) * 0.5;
-    let r = (hi - lo).length() * 0.5;
-    let mut g = Rng(seed);
-    (0..n)
-        .map(|_| {
-            let z = g.unit() * 2.0 - 1.0;
-            let t = g.unit() * std::f32::consts::TAU;
-            let s = (1.0 - z * z).sqrt();
-            c + Vec3::new(s * t.cos(), z, s * t.sin()) * r * (1.2 + 2.8 * g.unit())
-        })
-        .collect()
+    edgepoint_server::edges::sample::viewpoints(mesh.bounds, n, seed, 1.2, 4.0)
 }
 
 fn ms(t: Instant) -> f64 {

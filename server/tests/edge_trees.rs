@@ -8,6 +8,7 @@ use edgepoint_server::edges::brute;
 use edgepoint_server::edges::events::{find_events, find_events_brute, LocalLight, VertexRings};
 use edgepoint_server::edges::geometric::MeshEdgeTrees;
 use glam::Vec3;
+use edgepoint_server::edges::sample::{viewpoints, Rng};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 
@@ -29,31 +30,10 @@ fn dragon() -> &'static (Arc<Mesh>, MeshEdgeTrees) {
     D.get_or_init(|| model("dragon/dragon_vrip.ply"))
 }
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        let x = self.0;
-        (x ^ (x >> 33)).wrapping_mul(0xff51afd7ed558ccd) ^ (x >> 29)
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn dir(&mut self) -> Vec3 {
-        let z = self.unit() * 2.0 - 1.0;
-        let t = self.unit() * std::f32::consts::TAU;
-        let s = (1.0 - z * z).sqrt();
-        Vec3::new(s * t.cos(), z, s * t.sin())
-    }
-}
-
 /// Random eyes: uniform directions at 0.3 to 4 bounding radii from the centre (some inside
 /// the bounding sphere, most outside).
 fn eyes(mesh: &Mesh, n: usize, seed: u64) -> Vec<Vec3> {
-    let (lo, hi) = mesh.bounds;
-    let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
-    let mut g = Rng(seed);
-    (0..n).map(|_| c + g.dir() * r * (0.3 + 3.7 * g.unit())).collect()
+    viewpoints(mesh.bounds, n, seed, 0.3, 4.0)
 }
 
 /// Geometric edges from the trees equal brute force (all three kinds, exact sets).
@@ -108,10 +88,10 @@ fn dragon_geometric_edges_equal_brute_force_from_1000_views() {
 fn area_light(mesh: &Mesh, g: &mut Rng) -> LocalLight {
     let (lo, hi) = mesh.bounds;
     let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
-    let at = c + g.dir() * r * (1.2 + 2.0 * g.unit());
+    let at = c + g.direction() * r * (1.2 + 2.0 * g.unit());
     let n = (c - at).normalize();
     let (u, v) = n.any_orthonormal_pair();
-    let k = 3 + (g.next() % 4) as usize;
+    let k = 3 + g.below(4);
     let size = r * (0.05 + 0.95 * g.unit());
     let squash = 0.4 + 0.6 * g.unit();
     let phase = g.unit() * 6.0;
@@ -131,10 +111,10 @@ fn area_light(mesh: &Mesh, g: &mut Rng) -> LocalLight {
 
 fn events_equal(mesh: &Mesh, trees: &MeshEdgeTrees, points: usize, areas: usize, seed: u64) {
     let rings = VertexRings::build(mesh);
-    let mut g = Rng(seed);
+    let mut g = Rng::new(seed);
     let (lo, hi) = mesh.bounds;
     let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
-    let mut lights: Vec<LocalLight> = (0..points).map(|_| LocalLight::Point(c + g.dir() * r * (0.5 + 3.0 * g.unit()))).collect();
+    let mut lights: Vec<LocalLight> = (0..points).map(|_| LocalLight::Point(c + g.direction() * r * (0.5 + 3.0 * g.unit()))).collect();
     lights.extend((0..areas).map(|_| area_light(mesh, &mut g)));
     let (mut ve, mut ev) = (0usize, 0usize);
     for l in &lights {

@@ -15,25 +15,13 @@
 //! Triples come the way the workers find them: shadow rays from points on every receiver.
 use edgepoint_scene::{Light, NoProgress, Scene};
 use edgepoint_server::edges::finder::EdgeFinder;
+use edgepoint_server::edges::sample::Rng;
 use edgepoint_server::edges::events::{Generator, ShadowEvent};
 use edgepoint_server::edges::{EdgeKind, EdgeSegment};
 use edgepoint_server::session::TripleKey;
 use edgepoint_worker::{Instances, SceneBvh};
 use glam::{Affine3A, Vec3};
 use std::collections::BTreeSet;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
 
 fn data(path: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(path)
@@ -344,13 +332,13 @@ fn check(su: &Setup, delta_rel: f32, max: usize) -> Report {
     let delta = (hi - lo).length() * delta_rel;
     let all: Vec<((u32, u32), &ShadowEvent, &EdgeSegment)> =
         finder.store().events_with_edges().flat_map(|(k, e, segs)| segs.iter().map(move |s| (k, e, s))).collect();
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let mut rep = Report::default();
     let mut points = 0;
     let mut guard = 0;
     while points < max && guard < 20 * max && !all.is_empty() {
         guard += 1;
-        let k = (rng.next() % all.len() as u64) as usize;
+        let k = rng.below(all.len());
         let ((li, b), ev, s) = all[k];
         let light = &scene.lights[li as usize];
         let len = (s.b - s.a).length();
@@ -486,7 +474,7 @@ fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
     let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
     let all: Vec<TripleKey> = traced_triples(&scene, &t, 2000).into_iter().collect();
     assert!(all.len() >= 3, "{name}: {} triples", all.len());
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let mut live = Finder::new(&scene);
     let (lo, hi) = scene.bounds();
     let size = (hi - lo).length();
@@ -495,8 +483,8 @@ fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
     let (mut reused_steps, mut nonempty) = (0, 0);
     for step in 0..steps {
         // Move one or two objects a little (translation and a turn about y).
-        for _ in 0..1 + (rng.next() % 2) {
-            let o = (rng.next() % n as u64) as usize;
+        for _ in 0..1 + rng.below(2) {
+            let o = rng.below(n);
             let d = Vec3::new(rng.unit() - 0.5, (rng.unit() - 0.5) * 0.2, rng.unit() - 0.5) * size * 0.02;
             let c = t[o].transform_point3((scene.objects[o].mesh.bounds.0 + scene.objects[o].mesh.bounds.1) * 0.5);
             t[o] = Affine3A::from_translation(c + d)
@@ -506,7 +494,7 @@ fn incremental_equals_full(name: &str, steps: usize, seed: u64) {
             moved_total += 1;
         }
         // A random subset of the triples (some appear, some go).
-        let triples: Vec<TripleKey> = all.iter().copied().filter(|_| !rng.next().is_multiple_of(4)).collect();
+        let triples: Vec<TripleKey> = all.iter().copied().filter(|_| rng.below(4) != 0).collect();
         let got = live.frame(&t, &triples);
         recomputed += live.last.shadow.events_clipped;
         let st = live.last.shadow;

@@ -416,17 +416,7 @@ mod tests {
     use edgepoint_scene::NoProgress;
 
     fn cube(lo: Vec3, hi: Vec3) -> Mesh {
-        let c = |i: u32| {
-            Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            )
-        };
-        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-        let p: Vec<Vec3> = (0..8).map(c).collect();
-        let t = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-        Mesh::from_triangles(p, t, &NoProgress)
+        edgepoint_scene::builtin::shapes::cuboid(lo, hi)
     }
 
     fn square_light(y: f32, half: f32, rot: f32) -> LocalLight {
