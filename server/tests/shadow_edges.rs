@@ -415,25 +415,39 @@ fn check(su: &Setup, delta_rel: f32, max: usize) -> Report {
     rep
 }
 
-/// The agreement required. Disagreements come from: events of a blocker edge that another
-/// object hides from the light (the paper's clipping only sees the pair's own receivers
-/// and the blocker, so such edges lie inside the other object's shadow — both sides dark);
-/// edges where the event grazes the receiver, so the offset points land across the
-/// surface's own terminator; and tessellation (offset points projected back onto a
-/// neighbouring face). None of these is more than a few percent of the edges here.
+/// The agreement required of the event test (every kind) and of point lights. A shadow
+/// edge is where its event meets the first surface beyond the blocker, so the event's own
+/// light point flips visibility across it unless something the clipping does not see
+/// hides it: another object between the light and the blocker edge (the paper clips an
+/// event only against the pair's blocker and receivers), or the offset points landing
+/// across a terminator where the event grazes the receiver. Measured: 99–100 %.
 const MIN_AGREEMENT: f64 = 0.95;
 
-fn assert_agrees(name: &str, a: &Agreement, min_checked: usize) {
+/// Penumbral edges bound the blocker's penumbra where the blocker is locally the whole
+/// story. On a non-convex blocker (the torus) the penumbral edge of one part can lie inside
+/// the penumbra of another part of the same blocker (the events are local, VE/EV only, no
+/// EEE events — paper §6.3), so both sides see part of the light hidden. Measured 95–100 %.
+const MIN_PENUMBRAL_EXTREMAL: f64 = 0.9;
+
+/// Umbral events (light and blocker on the same side of the plane, §6.3) bound the umbra
+/// only up to where the umbra ends: behind a blocker smaller than the light the umbral
+/// wedges cross and the umbra closes, and beyond that they still mark a change in how the
+/// light is covered (a D1 discontinuity inside the penumbra) but have the light partly
+/// visible on both sides. The paper's algorithm, and ours, emit them there too; measured
+/// 70–93 % of umbral edge points bound full occlusion in these scenes.
+const MIN_UMBRAL_EXTREMAL: f64 = 0.6;
+
+fn assert_agrees(name: &str, a: &Agreement, min_checked: usize, min: f64) {
     eprintln!("{name}: {}/{} = {:.3}", a.agreed, a.checked, a.fraction());
     assert!(a.checked >= min_checked, "{name}: only {} points checked", a.checked);
-    assert!(a.fraction() >= MIN_AGREEMENT, "{name}: {a:?}");
+    assert!(a.fraction() >= min, "{name}: {a:?}");
 }
 
 #[test]
 fn point_light_shadow_edges_agree_with_ray_traced_visibility_in_the_cornell_box() {
     let su = setup(edgepoint_scene::builtin::load("cornell-point").unwrap());
     let r = check(&su, 2e-4, 300);
-    assert_agrees("cornell-point hard", &r.hard, 200);
+    assert_agrees("cornell-point hard", &r.hard, 200, MIN_AGREEMENT);
 }
 
 #[test]
@@ -441,7 +455,7 @@ fn point_light_shadow_edges_agree_with_ray_traced_visibility_on_the_bunny() {
     let path = data("bunny/bun_zipper.ply");
     let su = setup(edgepoint_scene::load::load_path(&path, &NoProgress).unwrap());
     let r = check(&su, 5e-5, 500);
-    assert_agrees("bunny hard", &r.hard, 300);
+    assert_agrees("bunny hard", &r.hard, 300, MIN_AGREEMENT);
 }
 
 #[test]
@@ -449,10 +463,10 @@ fn area_light_umbral_and_penumbral_edges_agree_with_ray_traced_visibility_in_the
     let su = setup(edgepoint_scene::builtin::load("cornell").unwrap());
     let r = check(&su, 2e-4, 400);
     eprintln!("{r:?}");
-    assert_agrees("cornell umbral event", &r.umbral_event, 50);
-    assert_agrees("cornell penumbral event", &r.penumbral_event, 50);
-    assert_agrees("cornell penumbral extremal", &r.penumbral_extremal, 50);
-    eprintln!("cornell umbral extremal: {:.3}", r.umbral_extremal.fraction());
+    assert_agrees("cornell umbral event", &r.umbral_event, 50, MIN_AGREEMENT);
+    assert_agrees("cornell penumbral event", &r.penumbral_event, 50, MIN_AGREEMENT);
+    assert_agrees("cornell penumbral extremal", &r.penumbral_extremal, 50, MIN_PENUMBRAL_EXTREMAL);
+    assert_agrees("cornell umbral extremal", &r.umbral_extremal, 50, MIN_UMBRAL_EXTREMAL);
 }
 
 /// Sorted shadow edges, as comparable keys.
@@ -536,4 +550,49 @@ fn incremental_shadow_updates_equal_full_recomputation_under_a_point_light() {
 #[test]
 fn incremental_shadow_updates_equal_full_recomputation_under_an_area_light() {
     incremental_equals_full("cornell", 12, 22);
+}
+
+#[test]
+fn incremental_shadow_updates_equal_full_recomputation_in_the_chains() {
+    incremental_equals_full("chains", 5, 23);
+}
+
+/// The torus resting on the capsule (paper Fig. 9): umbral and penumbral edges on the
+/// capsule and the floor, closing up next to where the torus touches the capsule.
+#[test]
+fn area_light_edges_of_the_torus_on_the_capsule_agree_with_ray_traced_visibility() {
+    let su = setup(edgepoint_scene::builtin::load("torus-capsule").unwrap());
+    let r = check(&su, 5e-5, 300);
+    eprintln!("{r:?}");
+    assert_agrees("torus-capsule umbral event", &r.umbral_event, 50, MIN_AGREEMENT);
+    assert_agrees("torus-capsule penumbral event", &r.penumbral_event, 50, MIN_AGREEMENT);
+    assert_agrees("torus-capsule penumbral extremal", &r.penumbral_extremal, 50, MIN_PENUMBRAL_EXTREMAL);
+    assert_agrees("torus-capsule umbral extremal", &r.umbral_extremal, 50, MIN_UMBRAL_EXTREMAL);
+    // Contact hardening: next to where the torus rests on the capsule the penumbra (the gap
+    // between umbral and penumbral edges) is much narrower than on the floor below. (The
+    // light is above the contacts, so they lie inside the umbra; the shadow's border passes
+    // a few centimetres away, where the torus is still a few millimetres above the capsule.)
+    let segs: Vec<EdgeSegment> = su.finder.store().events_with_edges().flat_map(|(_, _, s)| s.iter().copied()).collect();
+    let id = |n: &str| su.scene.object_id(n).unwrap();
+    let (capsule, floor) = (id("capsule"), id("floor"));
+    let gap = |receiver: u32, near: Option<Vec3>| {
+        let of = |k: EdgeKind| segs.iter().filter(move |s| s.object == receiver && s.kind == k);
+        let mut gaps: Vec<f32> = of(EdgeKind::ShadowUmbral)
+            .map(|u| (u.a + u.b) * 0.5)
+            .filter(|m| near.is_none_or(|c| (*m - c).length() < 0.06))
+            .map(|m| of(EdgeKind::ShadowPenumbral).map(|p| dist_segments(m, m, p.a, p.b)).fold(f32::INFINITY, f32::min))
+            .collect();
+        gaps.sort_by(f32::total_cmp);
+        // Narrowest near the contact; typical (median) on the floor.
+        let pick = if near.is_some() { 0 } else { gaps.len() / 2 };
+        gaps.get(pick).copied().unwrap_or(f32::INFINITY)
+    };
+    assert!(segs.iter().any(|s| s.object == capsule));
+    // The torus lies flat on the capsule's top ridge (y = 0.2) and touches it where its
+    // ring (radius 0.15) crosses the ridge, at x = ±0.15.
+    let contacts = [Vec3::new(0.15, 0.2, 0.0), Vec3::new(-0.15, 0.2, 0.0)];
+    let at_contact = contacts.iter().map(|c| gap(capsule, Some(*c))).fold(f32::INFINITY, f32::min);
+    let on_floor = gap(floor, None);
+    eprintln!("penumbra width: {at_contact:.4} next to the contact, {on_floor:.4} on the floor");
+    assert!(at_contact < 0.4 * on_floor, "{at_contact} vs {on_floor}");
 }
