@@ -84,7 +84,7 @@ pub struct FaceBvh {
     pub closed: bool,
 }
 
-const LEAF: usize = 4;
+const LEAF: usize = 8;
 const PARALLEL: usize = 1 << 14;
 
 #[derive(Clone, Copy)]

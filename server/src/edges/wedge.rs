@@ -100,12 +100,12 @@ impl Wedge {
     }
 
     /// The light point(s) of the event: `C` for a fan at the light, the light edge's ends
-    /// `C - D0`, `C - D1` otherwise.
-    pub fn light_points(&self) -> [DVec3; 2] {
+    /// `C - D0`, `C - D1` otherwise. The second is `None` when there is one.
+    pub fn light_points(&self) -> (DVec3, Option<DVec3>) {
         if self.ev {
-            [self.c - self.d0, self.c - self.d1]
+            (self.c - self.d0, Some(self.c - self.d1))
         } else {
-            [self.c, self.c]
+            (self.c, None)
         }
     }
 
@@ -271,28 +271,44 @@ impl Entry {
     }
 }
 
-/// Whether faces with normals in `[nlo, nhi]` at positions in `[lo, hi]` may face one of
-/// the light points: interval arithmetic in f64 (the face test below is f64 too), with a
-/// margin far above its rounding.
-fn may_face(nlo: &[f32; 3], nhi: &[f32; 3], lo: &[f32; 3], hi: &[f32; 3], lights: &[DVec3; 2]) -> bool {
-    lights.iter().any(|l| {
-        let mut top = 0.0;
-        let mut mag = 0.0;
-        for a in 0..3 {
-            let (v0, v1) = (l[a] - hi[a] as f64, l[a] - lo[a] as f64);
-            let (n0, n1) = (nlo[a] as f64, nhi[a] as f64);
-            top += (n0 * v0).max(n0 * v1).max(n1 * v0).max(n1 * v1);
-            mag += n0.abs().max(n1.abs()) * v0.abs().max(v1.abs());
-        }
-        top > -1e-9 * mag
-    })
+/// The light point(s) a search tests faces against, with the margin of the box test.
+struct Lights {
+    a: DVec3,
+    b: Option<DVec3>,
+    /// Far above the rounding of the box test (relative to the scale of the positions).
+    margin: f64,
 }
 
-/// Whether a face (first corner `p`, unit normal `n`) faces one of the light points.
-#[inline]
-pub fn faces_light(n: Vec3, p: Vec3, lights: &[DVec3; 2]) -> bool {
-    let (n, p) = (n.as_dvec3(), p.as_dvec3());
-    lights.iter().any(|l| n.dot(*l - p) > 0.0)
+impl Lights {
+    fn of(w: &Wedge) -> Lights {
+        let (a, b) = w.light_points();
+        let scale = a.abs().max_element() + w.d0.length() + w.d1.length();
+        Lights { a, b, margin: 1e-9 * scale }
+    }
+
+    /// Whether faces with unit normals in `[nlo, nhi]` at positions in `[lo, hi]` may face
+    /// one of the light points: the largest `n · (l - p)` over the boxes, by interval
+    /// arithmetic in f64 (the face test below is f64 too), against the margin.
+    #[inline]
+    fn may_face(&self, nlo: &[f32; 3], nhi: &[f32; 3], lo: &[f32; 3], hi: &[f32; 3]) -> bool {
+        let top = |l: DVec3| {
+            let mut t = 0.0;
+            for a in 0..3 {
+                let (v0, v1) = (l[a] - hi[a] as f64, l[a] - lo[a] as f64);
+                let (n0, n1) = (nlo[a] as f64, nhi[a] as f64);
+                t += (n0 * v0).max(n0 * v1).max(n1 * v0).max(n1 * v1);
+            }
+            t
+        };
+        top(self.a) > -self.margin || self.b.is_some_and(|b| top(b) > -self.margin)
+    }
+
+    /// Whether a face (first corner `p`, unit normal `n`) faces one of the light points.
+    #[inline]
+    fn faced_by(&self, n: Vec3, p: Vec3) -> bool {
+        let (n, p) = (n.as_dvec3(), p.as_dvec3());
+        n.dot(self.a - p) > 0.0 || self.b.is_some_and(|b| n.dot(b - p) > 0.0)
+    }
 }
 
 /// The pieces of `wedge` on the faces of `bvh` that can matter for the 1D clipping: front
@@ -302,12 +318,12 @@ pub fn faces_light(n: Vec3, p: Vec3, lights: &[DVec3; 2]) -> bool {
 /// edge or vertex when the receiver is the blocker itself.
 pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece>, scratch: &mut SearchScratch) {
     let Some(super::face_bvh::Root { child: root, lo, hi, nlo, nhi }) = bvh.root else { return };
-    let lights = wedge.light_points();
+    let lights = Lights::of(wedge);
     let cull = bvh.closed;
     let SearchScratch { heap, cov, counts } = scratch;
     heap.clear();
     cov.clear();
-    if cull && !may_face(&nlo, &nhi, &lo, &hi, &lights) {
+    if cull && !lights.may_face(&nlo, &nhi, &lo, &hi) {
         return;
     }
     if let Some(e) = wedge.node_bound(&lo, &hi).and_then(|m| Entry::of(m, root)) {
@@ -336,7 +352,7 @@ pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece
                 let Some(m) = wedge.node_bound(&node.lo[k], &node.hi[k]) else { continue };
                 if cull {
                     let nb = &bvh.normals[i as usize];
-                    if !may_face(&nb.lo[k], &nb.hi[k], &node.lo[k], &node.hi[k], &lights) {
+                    if !lights.may_face(&nb.lo[k], &nb.hi[k], &node.lo[k], &node.hi[k]) {
                         continue;
                     }
                 }
@@ -358,7 +374,7 @@ pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece
             if exclude.binary_search(&f.id).is_ok() {
                 continue;
             }
-            let facing = faces_light(f.n, f.v[0], &lights);
+            let facing = lights.faced_by(f.n, f.v[0]);
             if cull && !facing {
                 continue;
             }
