@@ -347,6 +347,36 @@ mod tests {
         }
     }
 
+    /// Moving a light recomputes its pairs: the result equals a finder built with the light
+    /// there from the start.
+    #[test]
+    fn a_moved_light_gives_the_shadows_of_its_new_place() {
+        let scene = edgepoint_scene::builtin::load("cornell-point").unwrap();
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let id = |n: &str| scene.object_id(n).unwrap();
+        let triples: Vec<TripleKey> = ["tallbox", "shortbox"]
+            .iter()
+            .flat_map(|b| ["floor", "back", "redwall", "greenwall"].map(|r| TripleKey { light: 0, blocker: id(b), receiver: id(r) }))
+            .collect();
+        let shadows = |f: &mut EdgeFinder| {
+            let mut out = Vec::new();
+            f.frame(&t, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
+            let mut k: Vec<_> = out.iter().filter(|s| !s.kind.is_geometric()).map(key).collect();
+            k.sort_unstable();
+            k
+        };
+        let mut live = EdgeFinder::new(&scene, &NoProgress);
+        let before = shadows(&mut live);
+        let moved = Light::Point { position: Vec3::new(0.15, 0.5, 0.2), intensity: Vec3::ONE };
+        live.set_light(0, moved.clone());
+        let after = shadows(&mut live);
+        let mut moved_scene = scene.clone();
+        moved_scene.lights[0] = moved;
+        let fresh = shadows(&mut EdgeFinder::new(&moved_scene, &NoProgress));
+        assert!(!before.is_empty() && before != after);
+        assert_eq!(after, fresh);
+    }
+
     #[test]
     fn the_view_volume_culls_objects_behind_and_beside_the_camera() {
         let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fov_y_degrees: 60.0 };
