@@ -12,7 +12,7 @@ use edgepoint_proto as pb;
 use edgepoint_server::image_metrics::{psnr, srgb8_to_linear, ssim};
 use edgepoint_server::reference::{render_reference, LogProgress, ReferenceImage};
 use edgepoint_server::workers::WorkerPool;
-use edgepoint_viewer::client::{camera_from_wire, scene_source_from_arg, Event, SessionClient};
+use edgepoint_viewer::client::{camera_from_wire, scene_source_from_arg_in, Event, SessionClient};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use glam::Vec3;
 use serde_json::json;
@@ -23,9 +23,14 @@ use std::time::{Duration, Instant};
 /// Options shared by `frame` and `reference`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SceneArgs {
-    /// Built-in scene name (cornell, cornell-point) or a .ply / .obj file.
+    /// Built-in scene name (cornell, cornell-point, chains, torus-capsule, grid-dragon,
+    /// rooms) or a .ply / .obj file.
     #[arg(long, default_value = "cornell")]
     pub scene: String,
+    /// Shared data directory for built-ins made from data (default: $EDGEPOINT_DATA, else
+    /// a shared/data directory above the working directory or the executable).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
     /// Image width in pixels.
     #[arg(long, default_value_t = 512)]
     pub width: u32,
@@ -153,7 +158,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let source = scene_source_from_arg(&a.scene)?;
+    let source = scene_source_from_arg_in(&a.scene, a.data_dir.as_deref())?;
     let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
@@ -310,7 +315,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
 
 pub fn run_reference(args: ReferenceArgs) -> Result<()> {
     let a = &args.scene;
-    let source = scene_source_from_arg(&a.scene)?;
+    let source = scene_source_from_arg_in(&a.scene, a.data_dir.as_deref())?;
     let scene = edgepoint_proto::scene_from_source(&source, &edgepoint_scene::NoProgress)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let cluster = start_cluster(a)?;

@@ -14,11 +14,13 @@
 //!   S concurrent sessions (fps per session, dropped frames, server memory), and a worker
 //!   killed/restarted and stopped/continued mid-session (longest frame gaps, rejoin time).
 //! - `load`: scene load (parse + weld + adjacency) and BVH build times.
+//! - `edges`: edge-tree build and silhouette times against brute force, shadow-edge times.
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 //! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
+mod edges;
 mod epi;
 mod frame;
 mod inprocess;
@@ -49,6 +51,8 @@ enum Cmd {
     Loadtest(loadtest::LoadtestArgs),
     /// Scene load, weld and BVH build times.
     Load(load::LoadArgs),
+    /// Edge trees and shadow edges: build time, silhouette time vs brute force, shadow-edge time.
+    Edges(edges::EdgesArgs),
     /// Render the 1-spp and converged reference images of a scene through local workers.
     Reference(frame::ReferenceArgs),
     /// Edge-and-point image stage times (1 thread / all threads) and bytes per pixel.
@@ -73,6 +77,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Reference(a) => frame::run_reference(a),
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
+        Cmd::Edges(a) => edges::run(a),
     }
 }
 

@@ -6,11 +6,12 @@
 //! ambient term. Meshes are kept in object space: moving an object changes only its
 //! transform, so per-object acceleration structures (BVHs, edge trees) never rebuild.
 //!
-//! Loaders read PLY (binary and ASCII) and OBJ (+MTL colours); built-in procedural scenes
-//! are in [`builtin`].
+//! Loaders read PLY (binary and ASCII) and OBJ (+MTL colours); built-in scenes are in
+//! [`builtin`] (procedural, or made from the shared data found by [`data`]).
 
 pub mod builtin;
 pub mod camera;
+pub mod data;
 pub mod error;
 pub mod light;
 pub mod load;

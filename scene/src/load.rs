@@ -36,6 +36,11 @@ pub fn load_files(files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene
         return Err(SceneError::file(name, "file is empty"));
     }
     match extension(name).as_str() {
+        crate::builtin::DESCRIPTION_EXTENSION => {
+            // A built-in made from data files: the description names it, the rest are its data.
+            let builtin = crate::builtin::parse_description(main)?;
+            crate::builtin::load_with_files(&builtin, &files[1..], progress)
+        }
         "ply" => {
             let (positions, triangles) = ply::read(name, &main.data, progress)?;
             let mesh = Mesh::from_triangles(positions, triangles, progress);
@@ -80,9 +85,30 @@ pub fn load_files(files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene
         }
         other => Err(SceneError::file(
             name,
-            format!("unsupported scene file type `.{other}` (supported: .ply, .obj)"),
+            format!("unsupported scene file type `.{other}` (supported: .ply, .obj, .builtin)"),
         )),
     }
+}
+
+/// The welded mesh of a mesh file (.ply; .obj: all its faces as one mesh).
+pub(crate) fn mesh_from_file(file: &NamedBytes, progress: &dyn Progress) -> Result<Mesh, SceneError> {
+    let name = file.name.as_str();
+    let mesh = match extension(name).as_str() {
+        "ply" => {
+            let (positions, triangles) = ply::read(name, &file.data, progress)?;
+            Mesh::from_triangles(positions, triangles, progress)
+        }
+        "obj" => {
+            let data = obj::read(file, &[], progress)?;
+            let triangles = data.runs.into_iter().flat_map(|r| r.triangles).collect();
+            Mesh::from_triangles(data.positions, triangles, progress)
+        }
+        other => return Err(SceneError::file(name, format!("unsupported mesh file type `.{other}` (supported: .ply, .obj)"))),
+    };
+    if mesh.triangles.is_empty() {
+        return Err(SceneError::file(name, "mesh has no (non-degenerate) triangles"));
+    }
+    Ok(mesh)
 }
 
 /// Reads a scene file from disk (for an OBJ also the `mtllib` files next to it) and loads it.

@@ -211,3 +211,31 @@ fn corrupted_files_never_panic() {
         let _ = load("x.obj", &b);
     }
 }
+
+/// `grid-dragon` is built from the shared dragon, found the way the viewer finds it (the
+/// test runs from the scene crate, below the worktree that has `shared/data` next to it),
+/// and travels as a description plus the PLY bytes.
+#[test]
+fn grid_dragon_is_built_from_the_shared_dragon() {
+    use edgepoint_scene::{builtin, data};
+    let files = data::builtin_files("grid-dragon", None).unwrap().expect("grid-dragon has data files");
+    assert_eq!(files[0].name, "grid-dragon.builtin");
+    assert_eq!(files[1].name, "dragon/dragon_vrip.ply");
+    let s = load_files(&files, &NoProgress).unwrap();
+    s.validate().unwrap();
+    assert_eq!(s.name, "grid-dragon");
+    let dragon = &s.objects[s.object_id("dragon").unwrap() as usize];
+    assert_eq!(dragon.mesh.triangles.len(), 871_306);
+    let grid = &s.objects[s.object_id("grid").unwrap() as usize];
+    let top = dragon.mesh.positions.iter().map(|p| dragon.transform.transform_point3(*p).y).fold(f32::MIN, f32::max);
+    let bottom = dragon.mesh.positions.iter().map(|p| dragon.transform.transform_point3(*p).y).fold(f32::MAX, f32::min);
+    let grid_bottom = grid.mesh.positions.iter().map(|p| grid.transform.transform_point3(*p).y).fold(f32::MAX, f32::min);
+    assert!(bottom.abs() < 1e-6, "the dragon stands on the floor");
+    assert!(grid_bottom > top + 0.05, "the grid hangs above the dragon");
+    assert!(s.lights[0].center().y > grid_bottom, "the light is above the grid");
+    // Without the data, the plain built-in loader explains what to do.
+    assert!(builtin::load("grid-dragon").unwrap_err().contains("--data-dir"));
+    // A description naming a missing data file is refused with the file named.
+    let e = load_files(&files[..1], &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("dragon_vrip.ply"), "{e}");
+}

@@ -8,7 +8,9 @@ pub mod metrics;
 mod rng;
 pub mod service;
 pub mod shade;
+pub mod triples;
 
 pub use bvh::{Hit, Instances, SceneBvh};
 pub use loaded::LoadedScene;
+pub use triples::sample_triples;
 pub use shade::{shade_batch, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

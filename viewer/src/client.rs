@@ -279,14 +279,24 @@ pub fn camera_from_wire(c: &pb::Camera) -> edgepoint_scene::Camera {
 /// extension, and no file of that name) is a built-in scene (`cornell`); anything else is
 /// a file path: `.ply` is sent alone, `.obj` together with the `mtllib` files it names
 /// (resolved next to it). Errors name the path (and the OBJ line of a missing `mtllib`).
+/// Built-ins made from shared data (`grid-dragon`) are sent as their description plus the
+/// data files, found as [`edgepoint_scene::data`] describes.
 pub fn scene_source_from_arg(arg: &str) -> anyhow::Result<pb::SceneSource> {
+    scene_source_from_arg_in(arg, None)
+}
+
+/// [`scene_source_from_arg`] with the shared data directory given (`--data-dir`).
+pub fn scene_source_from_arg_in(arg: &str, data_dir: Option<&Path>) -> anyhow::Result<pb::SceneSource> {
     if arg.trim().is_empty() {
         bail!("empty scene: give a built-in name (e.g. cornell) or a .ply / .obj file path");
     }
     let path = Path::new(arg);
     let has_separator = arg.contains('/') || arg.contains(std::path::MAIN_SEPARATOR);
     if !has_separator && path.extension().is_none() && !path.is_file() {
-        return Ok(pb::builtin_source(arg));
+        return match edgepoint_scene::data::builtin_files(arg, data_dir).map_err(anyhow::Error::msg)? {
+            None => Ok(pb::builtin_source(arg)),
+            Some(files) => Ok(pb::files_source(files.into_iter().map(|f| (f.name, f.data)).collect())),
+        };
     }
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     let main_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| arg.to_string());
@@ -346,6 +356,20 @@ mod tests {
             Some(Source::Files(f)) => f.files.iter().map(|f| (f.name.clone(), f.data.clone())).collect(),
             other => panic!("expected files, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn data_builtins_are_sent_with_their_data_or_explained() {
+        // From the viewer crate the worktree's shared/data is found above the working
+        // directory.
+        let src = scene_source_from_arg("grid-dragon").unwrap();
+        let files = files_of(&src);
+        assert_eq!(files[0].0, "grid-dragon.builtin");
+        assert_eq!(files[1].0, "dragon/dragon_vrip.ply");
+        assert!(files[1].1.len() > 10_000_000);
+        let nowhere = std::env::temp_dir().join("edgepoint-no-data-here");
+        let e = format!("{:#}", scene_source_from_arg_in("grid-dragon", Some(&nowhere)).unwrap_err());
+        assert!(e.contains("dragon_vrip.ply") && e.contains("--data-dir"), "{e}");
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub mod reconstruction;
 pub mod script;
 pub mod window;
 
-pub use client::{scene_source_from_arg, ClientError, ConnectOptions, Event, SessionClient, SessionSender};
+pub use client::{scene_source_from_arg, scene_source_from_arg_in, ClientError, ConnectOptions, Event, SessionClient, SessionSender};
 pub use headless::{FrameStats, HeadlessWriter};
 pub use local::{find_binary, LocalCluster, LocalOptions};
 pub use reconstruction::ReconstructionArgs;

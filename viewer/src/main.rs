@@ -10,7 +10,7 @@ use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use edgepoint_viewer::script::{Script, ScriptStep};
 use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
-use edgepoint_viewer::{scene_source_from_arg, ConnectOptions, Event, ReconstructionArgs, SessionClient};
+use edgepoint_viewer::{scene_source_from_arg_in, ConnectOptions, Event, ReconstructionArgs, SessionClient};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -88,10 +88,17 @@ struct Args {
     #[arg(long, value_name = "FILE")]
     cluster_log_file: Option<PathBuf>,
 
-    /// Scene to render: a built-in name (cornell, cornell-point) or a .ply / .obj file
-    /// (an OBJ's mtllib files are sent along from its directory).
+    /// Scene to render: a built-in name (cornell, cornell-point, chains, torus-capsule,
+    /// grid-dragon, rooms) or a .ply / .obj file (an OBJ's mtllib files are sent along from
+    /// its directory).
     #[arg(long, value_name = "NAME|PATH", default_value = "cornell")]
     scene: String,
+
+    /// The shared data directory holding the models built-in scenes are made from
+    /// (grid-dragon: dragon/dragon_vrip.ply). Default: $EDGEPOINT_DATA, else a shared/data
+    /// directory above the working directory or this executable.
+    #[arg(long, value_name = "DIR")]
+    data_dir: Option<PathBuf>,
 
     /// Frame width in pixels.
     #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
@@ -230,7 +237,7 @@ fn main() -> ExitCode {
 /// children killed) before the process exits, whatever the outcome.
 fn run(args: Args) -> Result<()> {
     // Read the scene before starting anything: a wrong path fails at once.
-    let scene = scene_source_from_arg(&args.scene)?;
+    let scene = scene_source_from_arg_in(&args.scene, args.data_dir.as_deref())?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

@@ -8,6 +8,16 @@
 use glam::{Affine3A, Vec3};
 
 pub mod brute;
+pub mod clip1d;
+pub mod events;
+pub mod face_bvh;
+pub mod finder;
+pub mod geometric;
+pub mod interval;
+pub mod sample;
+pub mod shadow;
+pub mod tree;
+pub mod wedge;
 
 /// Default sharp-edge cut-off (paper §6.2: "In our scenes, the cutoff angle is 85°"): an edge
 /// whose face normals differ by at least this angle is sharp.

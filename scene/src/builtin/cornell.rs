@@ -1,41 +1,16 @@
-//! Built-in procedural scenes.
-//!
 //! `cornell`: the Cornell box from Cornell's published measurements (converted from
 //! millimetres to metres), a short and a tall box, lit by the square ceiling luminaire as a
 //! polygonal area light (soft shadows). `cornell-point`: the same room lit by a point light
 //! just under the ceiling centre (hard shadows).
-use crate::{Camera, Light, Material, Mesh, NoProgress, Object, Scene};
-use glam::{Affine3A, Vec2, Vec3};
-use std::sync::Arc;
-
-/// Names of the built-in scenes, with one line each.
-pub const BUILTINS: &[(&str, &str)] = &[
-    ("cornell", "Cornell box with a tall and a short box under the square ceiling area light"),
-    ("cornell-point", "the Cornell box lit by a point light under the ceiling centre"),
-];
-
-/// Builds a built-in scene by name.
-pub fn load(name: &str) -> Result<Scene, String> {
-    match name {
-        "cornell" => Ok(cornell(false)),
-        "cornell-point" => Ok(cornell(true)),
-        _ => Err(format!(
-            "unknown built-in scene '{name}' (built-ins: {})",
-            BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
-        )),
-    }
-}
+use super::object;
+use super::shapes::polygon;
+use crate::{Camera, Light, Material, Mesh, NoProgress, Scene};
+use glam::{Vec2, Vec3};
 
 const MM: f32 = 0.001;
 
 fn mm(x: f32, y: f32, z: f32) -> Vec3 {
     Vec3::new(x, y, z) * MM
-}
-
-/// A planar polygon (fan-triangulated) as a mesh, wound as given.
-fn polygon(v: &[Vec3]) -> Mesh {
-    let tris = (1..v.len() as u32 - 1).map(|i| [0, i, i + 1]).collect();
-    Mesh::from_triangles(v.to_vec(), tris, &NoProgress)
 }
 
 /// A closed prism over a floor quad `foot` (x, z in mm) of height `h` mm, wound outward.
@@ -60,11 +35,7 @@ fn prism(foot: [Vec2; 4], h: f32) -> Mesh {
     m
 }
 
-fn object(name: &str, mesh: Mesh, material: Material) -> Object {
-    Object { name: name.to_string(), mesh: Arc::new(mesh), material, transform: Affine3A::IDENTITY }
-}
-
-fn cornell(point_light: bool) -> Scene {
+pub fn cornell(point_light: bool) -> Scene {
     let white = Material::diffuse("white", Vec3::splat(0.73));
     let red = Material::diffuse("red", Vec3::new(0.63, 0.065, 0.05));
     let green = Material::diffuse("green", Vec3::new(0.14, 0.45, 0.091));
@@ -135,16 +106,7 @@ fn cornell(point_light: bool) -> Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn builtins_are_valid() {
-        for (name, _) in BUILTINS {
-            let s = load(name).unwrap();
-            s.validate().unwrap();
-            assert_eq!(s.name, *name);
-        }
-        assert!(load("nope").unwrap_err().contains("cornell"));
-    }
+    use crate::builtin::load;
 
     #[test]
     fn cornell_geometry() {

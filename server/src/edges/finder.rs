@@ -1,0 +1,397 @@
+//! The edge finder of the frame loop (paper 000 §6, Figure 2 "find edges"): per frame the
+//! silhouettes, forward-facing sharp edges and boundary edges of the objects in view, from
+//! their edge trees, and the shadow edges of the light–blocker–receiver triples the shader
+//! workers reported, from the shadow store (recomputed only where something moved or a new
+//! triple appeared).
+//!
+//! ```ignore
+//! let mut finder = EdgeFinder::new(&scene, &progress);           // builds every tree
+//! let stats = finder.frame(&transforms, camera.eye, Some(&ViewVolume::new(&camera, aspect)),
+//!                          feedback.triples.keys().copied(), 85.0, &mut segments);
+//! ```
+use super::events::VertexRings;
+use super::face_bvh::FaceBvh;
+use super::geometric::MeshEdgeTrees;
+use super::shadow::{ShadowScene, ShadowStore, ShadowUpdateStats};
+use super::{EdgeCounts, EdgeKind, EdgeSegment};
+use crate::session::TripleKey;
+use edgepoint_scene::{Camera, Light, Mesh, Progress, Scene};
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The camera's view volume (four side planes and the eye plane), for culling objects.
+#[derive(Debug, Clone, Copy)]
+pub struct ViewVolume {
+    /// Inward plane normals and offsets: a point `p` is inside when `n · p >= d` for all.
+    planes: [(Vec3, f32); 5],
+}
+
+impl ViewVolume {
+    /// The volume seen by `camera` on an image of aspect ratio `aspect` (width / height).
+    pub fn new(camera: &Camera, aspect: f32) -> ViewVolume {
+        let f = camera.frame(1, 1);
+        let ty = f.tan_half_y;
+        let tx = ty * aspect.max(1e-6);
+        // Side planes through the eye, normals pointing inside.
+        let n = [
+            (f.forward + f.right * tx).cross(f.up).normalize_or_zero() * -1.0,
+            (f.forward - f.right * tx).cross(f.up).normalize_or_zero(),
+            (f.forward + f.up * ty).cross(f.right).normalize_or_zero(),
+            (f.forward - f.up * ty).cross(f.right).normalize_or_zero() * -1.0,
+        ];
+        let mut planes = [(f.forward, f.forward.dot(f.eye)); 5];
+        for (k, nk) in n.into_iter().enumerate() {
+            planes[k + 1] = (nk, nk.dot(f.eye));
+        }
+        ViewVolume { planes }
+    }
+
+    /// Whether the world-space box may be in view.
+    pub fn may_see(&self, lo: Vec3, hi: Vec3) -> bool {
+        self.planes.iter().all(|&(n, d)| {
+            // The box corner farthest along n.
+            let p = Vec3::select(n.cmpge(Vec3::ZERO), hi, lo);
+            n.dot(p) >= d - 1e-6 * (1.0 + d.abs())
+        })
+    }
+}
+
+/// One frame's edge finding.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameEdgeStats {
+    /// Silhouettes, sharp and boundary edges of the objects in view (ms).
+    pub find_ms: f64,
+    /// Shadow store update (events, intersections, clipping) (ms).
+    pub shadow_ms: f64,
+    /// Copying the stored shadow edges out (ms).
+    pub output_ms: f64,
+    pub objects_in_view: u32,
+    pub objects_moved: u32,
+    /// Segments handed out, per kind (paper Table 3: silhouette and shadow edges).
+    pub counts: EdgeCounts,
+    pub shadow: ShadowUpdateStats,
+}
+
+/// Build times and sizes.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FinderBuildStats {
+    pub edge_trees_ms: f64,
+    pub face_bvhs_ms: f64,
+    pub rings_ms: f64,
+    pub edges: usize,
+    pub faces: usize,
+}
+
+/// Edge trees, receiver hierarchies and the shadow store of one scene.
+pub struct EdgeFinder {
+    meshes: Vec<Arc<Mesh>>,
+    trees: Vec<MeshEdgeTrees>,
+    bvhs: Vec<FaceBvh>,
+    rings: Vec<Option<VertexRings>>,
+    lights: Vec<Light>,
+    defaults: Vec<Affine3A>,
+    /// Transforms of the last frame (moves are found by comparing).
+    transforms: Vec<Affine3A>,
+    light_moved: Vec<bool>,
+    /// Objects moved since the last shadow update.
+    moved: Vec<bool>,
+    cos_cutoff: Option<f32>,
+    store: ShadowStore,
+    pub build: FinderBuildStats,
+    scratch: (Vec<(u32, EdgeKind)>, Vec<u32>),
+}
+
+impl EdgeFinder {
+    /// Builds every object's edge tree and face hierarchy (and vertex rings when the scene
+    /// has area lights). Long builds show progress.
+    pub fn new(scene: &Scene, progress: &dyn Progress) -> EdgeFinder {
+        let meshes: Vec<Arc<Mesh>> = scene.objects.iter().map(|o| o.mesh.clone()).collect();
+        let edges: usize = meshes.iter().map(|m| m.edges.len()).sum();
+        let faces: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        let t = Instant::now();
+        progress.begin("edge trees", edges as u64);
+        let trees: Vec<MeshEdgeTrees> = meshes.par_iter().map(|m| MeshEdgeTrees::build(m, progress)).collect();
+        progress.end();
+        let edge_trees_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        progress.begin("receiver hierarchies", faces as u64);
+        let bvhs: Vec<FaceBvh> = meshes.par_iter().map(|m| FaceBvh::build(m, progress)).collect();
+        progress.end();
+        let face_bvhs_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let area = scene.lights.iter().any(|l| matches!(l, Light::Area { .. }));
+        let rings = meshes.par_iter().map(|m| area.then(|| VertexRings::build(m))).collect();
+        let rings_ms = t.elapsed().as_secs_f64() * 1e3;
+        let defaults: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        tracing::info!(
+            "edge finder: {} objects, {edges} edges, trees {edge_trees_ms:.0} ms, face hierarchies {face_bvhs_ms:.0} ms",
+            meshes.len()
+        );
+        EdgeFinder {
+            trees,
+            bvhs,
+            rings,
+            lights: scene.lights.clone(),
+            transforms: defaults.clone(),
+            light_moved: vec![false; scene.lights.len()],
+            moved: vec![false; meshes.len()],
+            defaults,
+            cos_cutoff: None,
+            store: ShadowStore::new(),
+            build: FinderBuildStats { edge_trees_ms, face_bvhs_ms, rings_ms, edges, faces },
+            scratch: Default::default(),
+            meshes,
+        }
+    }
+
+    /// Replaces light `i` (its shadow events are recomputed at the next frame).
+    pub fn set_light(&mut self, i: usize, light: Light) {
+        if let Some(l) = self.lights.get_mut(i) {
+            *l = light;
+            self.light_moved[i] = true;
+        }
+    }
+
+    /// The edge trees of object `o`.
+    pub fn trees(&self, o: usize) -> &MeshEdgeTrees {
+        &self.trees[o]
+    }
+
+    /// One frame: appends to `out` the silhouettes, forward-facing sharp edges (cut-off
+    /// `sharp_cutoff_degrees`) and boundary edges of every object in `view` (all objects
+    /// when `None`) seen from world-space `eye`, and the shadow edges of `triples` (the
+    /// whole current set) on receivers in view. `transforms[o]` is object `o`'s current
+    /// object-to-world transform (missing entries: the scene's default); objects whose
+    /// transform changed since the last frame count as moved.
+    ///
+    /// The same as [`Self::set_transforms`], [`Self::geometric_edges`] and
+    /// [`Self::shadow_edges`] in a row (call those to run the parts on their own).
+    pub fn frame(
+        &mut self,
+        transforms: &[Affine3A],
+        eye: Vec3,
+        view: Option<&ViewVolume>,
+        triples: impl IntoIterator<Item = TripleKey>,
+        sharp_cutoff_degrees: f32,
+        out: &mut Vec<EdgeSegment>,
+    ) -> FrameEdgeStats {
+        let first = out.len();
+        let objects_moved = self.set_transforms(transforms);
+        let (find_ms, objects_in_view) = self.geometric_edges(eye, view, sharp_cutoff_degrees, out);
+        let (shadow, shadow_ms, output_ms) = self.shadow_edges(triples, view, out);
+        FrameEdgeStats {
+            find_ms,
+            shadow_ms,
+            output_ms,
+            objects_in_view,
+            objects_moved,
+            counts: EdgeCounts::of(&out[first..]),
+            shadow,
+        }
+    }
+
+    /// Takes this frame's object transforms (`transforms[o]`, missing entries: the scene's
+    /// default); objects whose transform changed since the last call are moved for the next
+    /// [`Self::shadow_edges`]. Returns how many moved.
+    pub fn set_transforms(&mut self, transforms: &[Affine3A]) -> u32 {
+        let mut moved = 0;
+        for o in 0..self.meshes.len() {
+            let t = transforms.get(o).copied().unwrap_or(self.defaults[o]);
+            if t != self.transforms[o] {
+                self.transforms[o] = t;
+                self.moved[o] = true;
+                moved += 1;
+            }
+        }
+        moved
+    }
+
+    fn in_view(&self, view: Option<&ViewVolume>) -> Vec<bool> {
+        (0..self.meshes.len())
+            .map(|o| {
+                view.is_none_or(|v| {
+                    let (lo, hi) = world_box(&self.transforms[o], self.meshes[o].bounds);
+                    v.may_see(lo, hi)
+                })
+            })
+            .collect()
+    }
+
+    /// Appends the silhouettes, forward-facing sharp edges and boundary edges of every object
+    /// in `view` seen from world-space `eye`. Returns (milliseconds, objects in view).
+    pub fn geometric_edges(
+        &mut self,
+        eye: Vec3,
+        view: Option<&ViewVolume>,
+        sharp_cutoff_degrees: f32,
+        out: &mut Vec<EdgeSegment>,
+    ) -> (f64, u32) {
+        let t = Instant::now();
+        let cos = sharp_cutoff_degrees.to_radians().cos();
+        if self.cos_cutoff != Some(cos) {
+            let meshes = &self.meshes;
+            self.trees.par_iter_mut().enumerate().for_each(|(o, t)| {
+                t.prepare_sharp(&meshes[o], cos);
+            });
+            self.cos_cutoff = Some(cos);
+        }
+        let in_view = self.in_view(view);
+        let mut seen = 0;
+        let (found, scratch) = &mut self.scratch;
+        for (o, &visible) in in_view.iter().enumerate() {
+            if !visible {
+                continue;
+            }
+            seen += 1;
+            let to_world = self.transforms[o];
+            let eye_obj = to_world.inverse().transform_point3(eye);
+            found.clear();
+            self.trees[o].query(eye_obj, found, scratch);
+            let m = &self.meshes[o];
+            out.extend(found.iter().map(|&(i, kind)| {
+                let e = &m.edges[i as usize];
+                EdgeSegment {
+                    a: to_world.transform_point3(m.positions[e.v[0] as usize]),
+                    b: to_world.transform_point3(m.positions[e.v[1] as usize]),
+                    kind,
+                    object: o as u32,
+                }
+            }));
+        }
+        (t.elapsed().as_secs_f64() * 1e3, seen)
+    }
+
+    /// Brings the shadow store up to date with `triples` (the whole current set) and the
+    /// moves since the last call, and appends the shadow edges on receivers in `view`.
+    /// Returns (what the update did, its milliseconds, milliseconds copying edges out).
+    pub fn shadow_edges(
+        &mut self,
+        triples: impl IntoIterator<Item = TripleKey>,
+        view: Option<&ViewVolume>,
+        out: &mut Vec<EdgeSegment>,
+    ) -> (ShadowUpdateStats, f64, f64) {
+        let t = Instant::now();
+        let scene = ShadowScene {
+            meshes: &self.meshes,
+            trees: &self.trees,
+            rings: &self.rings,
+            bvhs: &self.bvhs,
+            lights: &self.lights,
+            transforms: &self.transforms,
+        };
+        let stats = self.store.update(&scene, triples, &self.moved, &self.light_moved);
+        self.light_moved.iter_mut().for_each(|m| *m = false);
+        self.moved.iter_mut().for_each(|m| *m = false);
+        let shadow_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let in_view = self.in_view(view);
+        self.store.append(out, |o| in_view.get(o as usize).copied().unwrap_or(false));
+        (stats, shadow_ms, t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// The shadow store (for inspection and benchmarks).
+    pub fn store(&self) -> &ShadowStore {
+        &self.store
+    }
+}
+
+/// World box of an object-space box.
+pub fn world_box(t: &Affine3A, (lo, hi): (Vec3, Vec3)) -> (Vec3, Vec3) {
+    let mut a = Vec3::splat(f32::INFINITY);
+    let mut b = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        let w = t.transform_point3(c);
+        a = a.min(w);
+        b = b.max(w);
+    }
+    (a, b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::edges::brute;
+    use edgepoint_scene::NoProgress;
+
+    fn key(s: &EdgeSegment) -> (u32, EdgeKind, [i64; 6]) {
+        let q = |x: f32| (x * 1e5).round() as i64;
+        (s.object, s.kind, [q(s.a.x), q(s.a.y), q(s.a.z), q(s.b.x), q(s.b.y), q(s.b.z)])
+    }
+
+    #[test]
+    fn geometric_edges_equal_brute_force_in_a_moved_scene() {
+        let scene = edgepoint_scene::builtin::load("cornell").unwrap();
+        let mut f = EdgeFinder::new(&scene, &NoProgress);
+        let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let tall = scene.object_id("tallbox").unwrap() as usize;
+        for step in 0..5 {
+            t[tall] = Affine3A::from_rotation_y(0.3 * step as f32) * scene.objects[tall].transform;
+            let eye = scene.camera.eye + Vec3::new(0.1 * step as f32, 0.0, 0.0);
+            let mut got = Vec::new();
+            let st = f.frame(&t, eye, None, std::iter::empty(), 85.0, &mut got);
+            let mut want = Vec::new();
+            brute::scene_edges(&scene, &t, eye, 85.0, &mut want);
+            let (mut g, mut w): (Vec<_>, Vec<_>) = (got.iter().map(key).collect(), want.iter().map(key).collect());
+            g.sort_unstable();
+            w.sort_unstable();
+            assert_eq!(g, w);
+            assert_eq!(st.counts.shadow, 0);
+            assert_eq!(st.objects_moved, (step > 0) as u32);
+        }
+    }
+
+    /// Moving a light recomputes its pairs: the result equals a finder built with the light
+    /// there from the start.
+    #[test]
+    fn a_moved_light_gives_the_shadows_of_its_new_place() {
+        let scene = edgepoint_scene::builtin::load("cornell-point").unwrap();
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let id = |n: &str| scene.object_id(n).unwrap();
+        let triples: Vec<TripleKey> = ["tallbox", "shortbox"]
+            .iter()
+            .flat_map(|b| ["floor", "back", "redwall", "greenwall"].map(|r| TripleKey { light: 0, blocker: id(b), receiver: id(r) }))
+            .collect();
+        let shadows = |f: &mut EdgeFinder| {
+            let mut out = Vec::new();
+            f.frame(&t, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
+            let mut k: Vec<_> = out.iter().filter(|s| !s.kind.is_geometric()).map(key).collect();
+            k.sort_unstable();
+            k
+        };
+        let mut live = EdgeFinder::new(&scene, &NoProgress);
+        let before = shadows(&mut live);
+        let moved = Light::Point { position: Vec3::new(0.15, 0.5, 0.2), intensity: Vec3::ONE };
+        live.set_light(0, moved.clone());
+        let after = shadows(&mut live);
+        let mut moved_scene = scene.clone();
+        moved_scene.lights[0] = moved;
+        let fresh = shadows(&mut EdgeFinder::new(&moved_scene, &NoProgress));
+        assert!(!before.is_empty() && before != after);
+        assert_eq!(after, fresh);
+    }
+
+    #[test]
+    fn the_view_volume_culls_objects_behind_and_beside_the_camera() {
+        let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fov_y_degrees: 60.0 };
+        let v = ViewVolume::new(&cam, 1.0);
+        let unit = |c: Vec3| v.may_see(c - Vec3::splat(0.1), c + Vec3::splat(0.1));
+        assert!(unit(Vec3::new(0.0, 0.0, -5.0)));
+        assert!(!unit(Vec3::new(0.0, 0.0, 5.0)), "behind");
+        assert!(!unit(Vec3::new(10.0, 0.0, -5.0)), "right");
+        assert!(!unit(Vec3::new(-10.0, 0.0, -5.0)), "left");
+        assert!(!unit(Vec3::new(0.0, 10.0, -5.0)), "above");
+        assert!(!unit(Vec3::new(0.0, -10.0, -5.0)), "below");
+        // Straddling the edge of the view counts as visible.
+        assert!(unit(Vec3::new(2.85, 0.0, -5.0)));
+        // A wide image sees farther sideways.
+        let w = ViewVolume::new(&cam, 3.0);
+        assert!(w.may_see(Vec3::new(5.0, -0.1, -5.1), Vec3::new(5.2, 0.1, -4.9)));
+    }
+}
