@@ -20,6 +20,7 @@
 //! - [`service`] — the `Renderer` gRPC service.
 
 pub mod cli;
+pub mod background;
 pub mod edges;
 pub mod encode;
 pub mod epi;
@@ -28,6 +29,7 @@ pub mod metrics;
 pub mod reference;
 pub mod render_cache;
 pub mod sampling;
+pub mod scenes;
 pub mod service;
 pub mod session;
 pub mod stage_times;

@@ -103,6 +103,8 @@ struct ServiceState {
     next: AtomicU64,
     shutting_down: AtomicBool,
     sessions: Mutex<HashMap<u64, Weak<crate::session::SessionOutput>>>,
+    /// Scenes and edge indexes shared by the sessions on the same scene.
+    scenes: crate::scenes::SceneLibrary,
 }
 
 /// A session slot; released on drop.
@@ -328,12 +330,18 @@ impl RendererService {
         let hash = pb::scene_hash(&source);
         let what = pb::describe_source(&source);
         tracing::info!(?peer, scene = %what, width = start.width, height = start.height, "session starting");
-        let src = source.clone();
-        let scene = tokio::task::spawn_blocking(move || pb::scene_from_source(&src, &LogProgress::new("scene")))
-            .await
-            .map_err(|e| Status::internal(format!("scene build task failed: {e}")))?
-            .map_err(|e| invalid(e.to_string()))?;
-        let scene = Arc::new(scene);
+        let shared = match self.state.scenes.get(&hash) {
+            Some(shared) => shared,
+            None => {
+                let src = source.clone();
+                let scene = tokio::task::spawn_blocking(move || pb::scene_from_source(&src, &LogProgress::new("scene")))
+                    .await
+                    .map_err(|e| Status::internal(format!("scene build task failed: {e}")))?
+                    .map_err(|e| invalid(e.to_string()))?;
+                self.state.scenes.insert(&hash, scene)
+            }
+        };
+        let scene = shared.scene;
         let camera = match &start.camera {
             Some(c) => camera_from_wire(c).map_err(|e| invalid(format!("start.camera: {e}")))?,
             None => scene.camera,
@@ -358,6 +366,7 @@ impl RendererService {
             settings: checked.settings,
             points_per_pixel: self.cfg.points_per_pixel,
             seed,
+            edge_index: shared.edge_index,
         };
         let state = self.state.clone();
         let on_end: Box<dyn FnOnce() + Send> = Box::new(move || {

@@ -6,7 +6,7 @@
 use edgepoint_scene::{light::polygon_normal, Mesh, NoProgress};
 use edgepoint_server::edges::brute;
 use edgepoint_server::edges::events::{find_events, find_events_brute, LocalLight, VertexRings};
-use edgepoint_server::edges::geometric::MeshEdgeTrees;
+use edgepoint_server::edges::geometric::{MeshEdgeTrees, SharpTree};
 use glam::Vec3;
 use edgepoint_server::edges::sample::{viewpoints, Rng};
 use rayon::prelude::*;
@@ -37,21 +37,22 @@ fn eyes(mesh: &Mesh, n: usize, seed: u64) -> Vec<Vec3> {
 }
 
 /// Geometric edges from the trees equal brute force (all three kinds, exact sets).
-fn geometric_equal(mesh: &Mesh, trees: &mut MeshEdgeTrees, views: usize, seed: u64) {
+fn geometric_equal(mesh: &Mesh, trees: &MeshEdgeTrees, views: usize, seed: u64) {
     let eyes = eyes(mesh, views, seed);
     let mut silhouettes = 0usize;
+    let mut sharp = SharpTree::default();
     for (k, cutoff) in [85.0f32, 40.0].into_iter().enumerate() {
         let cos = cutoff.to_radians().cos();
-        trees.prepare_sharp(mesh, cos);
+        trees.prepare_sharp(mesh, cos, &mut sharp);
         let part = &eyes[k * views / 2..(k + 1) * views / 2];
-        let trees = &*trees;
+        let sharp = &sharp;
         silhouettes += part
             .par_iter()
             .map(|&eye| {
                 let mut want = Vec::new();
                 brute::mesh_edges(mesh, eye, cos, &mut want);
                 let mut got = Vec::new();
-                trees.query(eye, &mut got, &mut Vec::new());
+                trees.query(sharp, eye, &mut got, &mut Vec::new());
                 want.sort_unstable();
                 got.sort_unstable();
                 assert!(got == want, "eye {eye}, cut-off {cutoff}: tree {} edges, brute force {}", got.len(), want.len());
@@ -64,23 +65,22 @@ fn geometric_equal(mesh: &Mesh, trees: &mut MeshEdgeTrees, views: usize, seed: u
 
 #[test]
 fn bunny_geometric_edges_equal_brute_force_from_1000_views() {
-    let (mesh, mut trees) = model("bunny/bun_zipper.ply");
+    let (mesh, trees) = model("bunny/bun_zipper.ply");
     assert!(!trees.boundary.is_empty(), "the bunny has holes: boundary edges are exercised");
-    geometric_equal(&mesh, &mut trees, 1000, 1);
+    geometric_equal(&mesh, &trees, 1000, 1);
 }
 
 #[test]
 fn torus_geometric_edges_equal_brute_force_from_1000_views() {
-    let (mesh, mut trees) = model("torus/torus.obj");
-    geometric_equal(&mesh, &mut trees, 1000, 2);
+    let (mesh, trees) = model("torus/torus.obj");
+    geometric_equal(&mesh, &trees, 1000, 2);
 }
 
 #[test]
 fn dragon_geometric_edges_equal_brute_force_from_1000_views() {
     let (mesh, trees) = dragon();
-    let mut trees = trees.clone();
     assert_eq!(trees.silhouette.len + trees.boundary.len(), mesh.edges.len(), "every dragon edge is in a tree");
-    geometric_equal(mesh, &mut trees, 1000, 3);
+    geometric_equal(mesh, trees, 1000, 3);
 }
 
 /// A random convex polygonal light near the mesh facing its centre: 3 to 6 vertices on a

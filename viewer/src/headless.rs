@@ -115,6 +115,12 @@ pub struct EdgeStats {
     pub shadow_penumbral: u32,
     pub fragments: u32,
     pub culled: u32,
+    /// Found with the edge trees (false while they build: brute force).
+    pub edge_trees: bool,
+    /// Shadow-store updates finished since the previous frame (ms, on the server's shadow
+    /// thread).
+    pub shadow_update_ms: f64,
+    pub shadow_pairs: u32,
 }
 
 impl From<&pb::EdgeCounts> for EdgeStats {
@@ -128,6 +134,9 @@ impl From<&pb::EdgeCounts> for EdgeStats {
             shadow_penumbral: e.shadow_penumbral,
             fragments: e.fragments,
             culled: e.culled,
+            edge_trees: e.edge_trees,
+            shadow_update_ms: e.shadow_update_ms,
+            shadow_pairs: e.shadow_pairs,
         }
     }
 }

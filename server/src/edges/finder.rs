@@ -11,7 +11,7 @@
 //! ```
 use super::events::VertexRings;
 use super::face_bvh::FaceBvh;
-use super::geometric::MeshEdgeTrees;
+use super::geometric::{MeshEdgeTrees, SharpTree};
 use super::shadow::{ShadowScene, ShadowStore, ShadowUpdateStats};
 use super::{EdgeCounts, EdgeKind, EdgeSegment};
 use crate::session::TripleKey;
@@ -84,29 +84,25 @@ pub struct FinderBuildStats {
     pub faces: usize,
 }
 
-/// Edge trees, receiver hierarchies and the shadow store of one scene.
-pub struct EdgeFinder {
+/// Everything per object that edge finding reads and never changes once built: the meshes,
+/// their edge trees (§6.4), receiver face hierarchies and vertex rings (§6.3). Queries run
+/// in object space, so moves never touch it; it is shared (behind an `Arc`) by every
+/// session on the same scene and by each session's frame and shadow threads.
+pub struct SceneEdgeIndex {
     meshes: Vec<Arc<Mesh>>,
     trees: Vec<MeshEdgeTrees>,
     bvhs: Vec<FaceBvh>,
     rings: Vec<Option<VertexRings>>,
-    lights: Vec<Light>,
+    /// The scene's default object transforms and lights.
     defaults: Vec<Affine3A>,
-    /// Transforms of the last frame (moves are found by comparing).
-    transforms: Vec<Affine3A>,
-    light_moved: Vec<bool>,
-    /// Objects moved since the last shadow update.
-    moved: Vec<bool>,
-    cos_cutoff: Option<f32>,
-    store: ShadowStore,
+    lights: Vec<Light>,
     pub build: FinderBuildStats,
-    scratch: (Vec<(u32, EdgeKind)>, Vec<u32>),
 }
 
-impl EdgeFinder {
+impl SceneEdgeIndex {
     /// Builds every object's edge tree and face hierarchy (and vertex rings when the scene
-    /// has area lights). Long builds show progress.
-    pub fn new(scene: &Scene, progress: &dyn Progress) -> EdgeFinder {
+    /// has area lights), in parallel. Long builds show progress.
+    pub fn build(scene: &Scene, progress: &dyn Progress) -> SceneEdgeIndex {
         let meshes: Vec<Arc<Mesh>> = scene.objects.iter().map(|o| o.mesh.clone()).collect();
         let edges: usize = meshes.iter().map(|m| m.edges.len()).sum();
         let faces: usize = meshes.iter().map(|m| m.triangles.len()).sum();
@@ -124,29 +120,145 @@ impl EdgeFinder {
         let area = scene.lights.iter().any(|l| matches!(l, Light::Area { .. }));
         let rings = meshes.par_iter().map(|m| area.then(|| VertexRings::build(m))).collect();
         let rings_ms = t.elapsed().as_secs_f64() * 1e3;
-        let defaults: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
         tracing::info!(
             "edge finder: {} objects, {edges} edges, trees {edge_trees_ms:.0} ms, face hierarchies {face_bvhs_ms:.0} ms",
             meshes.len()
         );
-        EdgeFinder {
+        SceneEdgeIndex {
             trees,
             bvhs,
             rings,
+            defaults: scene.objects.iter().map(|o| o.transform).collect(),
             lights: scene.lights.clone(),
-            transforms: defaults.clone(),
-            light_moved: vec![false; scene.lights.len()],
-            moved: vec![false; meshes.len()],
-            defaults,
-            cos_cutoff: None,
-            store: ShadowStore::new(),
             build: FinderBuildStats { edge_trees_ms, face_bvhs_ms, rings_ms, edges, faces },
-            scratch: Default::default(),
             meshes,
         }
     }
 
-    /// Replaces light `i` (its shadow events are recomputed at the next frame).
+    /// Number of objects.
+    pub fn objects(&self) -> usize {
+        self.meshes.len()
+    }
+
+    /// The edge trees of object `o`.
+    pub fn trees(&self, o: usize) -> &MeshEdgeTrees {
+        &self.trees[o]
+    }
+
+    /// Object `o`'s transform in `transforms`, or its scene default.
+    fn transform(&self, transforms: &[Affine3A], o: usize) -> Affine3A {
+        transforms.get(o).copied().unwrap_or(self.defaults[o])
+    }
+
+    /// Which objects may be in `view` (all when `None`) at `transforms`.
+    fn in_view(&self, transforms: &[Affine3A], view: Option<&ViewVolume>) -> Vec<bool> {
+        (0..self.meshes.len())
+            .map(|o| {
+                view.is_none_or(|v| {
+                    let (lo, hi) = world_box(&self.transform(transforms, o), self.meshes[o].bounds);
+                    v.may_see(lo, hi)
+                })
+            })
+            .collect()
+    }
+}
+
+/// The view-dependent part of edge finding (§6.1, §6.2): silhouettes, forward-facing sharp
+/// edges and boundary edges of the objects in view, from the shared trees. Owns the sharp
+/// trees of its cut-off. Runs on the frame thread, every frame.
+pub struct GeometricFinder {
+    index: Arc<SceneEdgeIndex>,
+    sharp: Vec<SharpTree>,
+    cos_cutoff: Option<f32>,
+    scratch: (Vec<(u32, EdgeKind)>, Vec<u32>),
+}
+
+impl GeometricFinder {
+    pub fn new(index: Arc<SceneEdgeIndex>) -> GeometricFinder {
+        let n = index.objects();
+        GeometricFinder { index, sharp: vec![SharpTree::default(); n], cos_cutoff: None, scratch: Default::default() }
+    }
+
+    pub fn index(&self) -> &Arc<SceneEdgeIndex> {
+        &self.index
+    }
+
+    /// Appends the silhouettes, forward-facing sharp edges (cut-off `sharp_cutoff_degrees`)
+    /// and boundary edges of every object in `view` (all when `None`) seen from world-space
+    /// `eye`, with objects at `transforms` (missing entries: the scene's default). Returns
+    /// (milliseconds, objects in view).
+    pub fn edges(
+        &mut self,
+        transforms: &[Affine3A],
+        eye: Vec3,
+        view: Option<&ViewVolume>,
+        sharp_cutoff_degrees: f32,
+        out: &mut Vec<EdgeSegment>,
+    ) -> (f64, u32) {
+        let t = Instant::now();
+        let index = &*self.index;
+        let cos = sharp_cutoff_degrees.to_radians().cos();
+        if self.cos_cutoff != Some(cos) {
+            self.sharp.par_iter_mut().enumerate().for_each(|(o, sharp)| {
+                index.trees[o].prepare_sharp(&index.meshes[o], cos, sharp);
+            });
+            self.cos_cutoff = Some(cos);
+        }
+        let in_view = index.in_view(transforms, view);
+        let mut seen = 0;
+        let (found, scratch) = &mut self.scratch;
+        for (o, &visible) in in_view.iter().enumerate() {
+            if !visible {
+                continue;
+            }
+            seen += 1;
+            let to_world = index.transform(transforms, o);
+            let eye_obj = to_world.inverse().transform_point3(eye);
+            found.clear();
+            index.trees[o].query(&self.sharp[o], eye_obj, found, scratch);
+            let m = &index.meshes[o];
+            out.extend(found.iter().map(|&(i, kind)| {
+                let e = &m.edges[i as usize];
+                EdgeSegment {
+                    a: to_world.transform_point3(m.positions[e.v[0] as usize]),
+                    b: to_world.transform_point3(m.positions[e.v[1] as usize]),
+                    kind,
+                    object: o as u32,
+                }
+            }));
+        }
+        (t.elapsed().as_secs_f64() * 1e3, seen)
+    }
+}
+
+/// The view-independent part (§6.3, §6.5): the shadow store, brought up to date with the
+/// triples and the moves. Its updates can take long (a new light–blocker pair on a big
+/// blocker), so a session runs it on its own thread, beside the frame loop.
+pub struct ShadowFinder {
+    index: Arc<SceneEdgeIndex>,
+    lights: Vec<Light>,
+    /// Transforms of the last update (moves are found by comparing).
+    transforms: Vec<Affine3A>,
+    light_moved: Vec<bool>,
+    /// Objects moved since the last update.
+    moved: Vec<bool>,
+    store: ShadowStore,
+}
+
+impl ShadowFinder {
+    pub fn new(index: Arc<SceneEdgeIndex>) -> ShadowFinder {
+        let n = index.objects();
+        ShadowFinder {
+            lights: index.lights.clone(),
+            transforms: index.defaults.clone(),
+            light_moved: vec![false; index.lights.len()],
+            moved: vec![false; n],
+            store: ShadowStore::new(),
+            index,
+        }
+    }
+
+    /// Replaces light `i` (its shadow events are recomputed at the next update).
     pub fn set_light(&mut self, i: usize, light: Light) {
         if let Some(l) = self.lights.get_mut(i) {
             *l = light;
@@ -154,9 +266,83 @@ impl EdgeFinder {
         }
     }
 
+    /// Takes the current object transforms (`transforms[o]`, missing entries: the scene's
+    /// default); objects whose transform changed since the last call are moved for the
+    /// next [`Self::update`]. Returns how many moved.
+    pub fn set_transforms(&mut self, transforms: &[Affine3A]) -> u32 {
+        let mut moved = 0;
+        for o in 0..self.index.objects() {
+            let t = self.index.transform(transforms, o);
+            if t != self.transforms[o] {
+                self.transforms[o] = t;
+                self.moved[o] = true;
+                moved += 1;
+            }
+        }
+        moved
+    }
+
+    /// The transforms the store is (or will be, after [`Self::update`]) computed for.
+    pub fn transforms(&self) -> &[Affine3A] {
+        &self.transforms
+    }
+
+    /// Brings the shadow store up to date with `triples` (the whole current set) and the
+    /// moves since the last update. Returns what it did and its milliseconds.
+    pub fn update(&mut self, triples: impl IntoIterator<Item = TripleKey>) -> (ShadowUpdateStats, f64) {
+        let t = Instant::now();
+        let index = &*self.index;
+        let scene = ShadowScene {
+            meshes: &index.meshes,
+            trees: &index.trees,
+            rings: &index.rings,
+            bvhs: &index.bvhs,
+            lights: &self.lights,
+            transforms: &self.transforms,
+        };
+        let stats = self.store.update(&scene, triples, &self.moved, &self.light_moved);
+        self.light_moved.iter_mut().for_each(|m| *m = false);
+        self.moved.iter_mut().for_each(|m| *m = false);
+        (stats, t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// Appends the stored shadow edges on receivers in `view` (all when `None`).
+    pub fn append(&self, view: Option<&ViewVolume>, out: &mut Vec<EdgeSegment>) {
+        let in_view = self.index.in_view(&self.transforms, view);
+        self.store.append(out, |o| in_view.get(o as usize).copied().unwrap_or(false));
+    }
+
+    /// The shadow store (for inspection and benchmarks).
+    pub fn store(&self) -> &ShadowStore {
+        &self.store
+    }
+}
+
+/// Both parts on one thread, for tests, benchmarks and single-threaded callers.
+pub struct EdgeFinder {
+    geometric: GeometricFinder,
+    shadows: ShadowFinder,
+    pub build: FinderBuildStats,
+}
+
+impl EdgeFinder {
+    /// Builds every object's edge tree and face hierarchy (see [`SceneEdgeIndex::build`]).
+    pub fn new(scene: &Scene, progress: &dyn Progress) -> EdgeFinder {
+        EdgeFinder::from_index(Arc::new(SceneEdgeIndex::build(scene, progress)))
+    }
+
+    pub fn from_index(index: Arc<SceneEdgeIndex>) -> EdgeFinder {
+        EdgeFinder { build: index.build, geometric: GeometricFinder::new(index.clone()), shadows: ShadowFinder::new(index) }
+    }
+
+    /// Replaces light `i` (its shadow events are recomputed at the next frame).
+    pub fn set_light(&mut self, i: usize, light: Light) {
+        self.shadows.set_light(i, light);
+    }
+
     /// The edge trees of object `o`.
     pub fn trees(&self, o: usize) -> &MeshEdgeTrees {
-        &self.trees[o]
+        self.geometric.index.trees(o)
     }
 
     /// One frame: appends to `out` the silhouettes, forward-facing sharp edges (cut-off
@@ -196,71 +382,14 @@ impl EdgeFinder {
     /// default); objects whose transform changed since the last call are moved for the next
     /// [`Self::shadow_edges`]. Returns how many moved.
     pub fn set_transforms(&mut self, transforms: &[Affine3A]) -> u32 {
-        let mut moved = 0;
-        for o in 0..self.meshes.len() {
-            let t = transforms.get(o).copied().unwrap_or(self.defaults[o]);
-            if t != self.transforms[o] {
-                self.transforms[o] = t;
-                self.moved[o] = true;
-                moved += 1;
-            }
-        }
-        moved
-    }
-
-    fn in_view(&self, view: Option<&ViewVolume>) -> Vec<bool> {
-        (0..self.meshes.len())
-            .map(|o| {
-                view.is_none_or(|v| {
-                    let (lo, hi) = world_box(&self.transforms[o], self.meshes[o].bounds);
-                    v.may_see(lo, hi)
-                })
-            })
-            .collect()
+        self.shadows.set_transforms(transforms)
     }
 
     /// Appends the silhouettes, forward-facing sharp edges and boundary edges of every object
-    /// in `view` seen from world-space `eye`. Returns (milliseconds, objects in view).
-    pub fn geometric_edges(
-        &mut self,
-        eye: Vec3,
-        view: Option<&ViewVolume>,
-        sharp_cutoff_degrees: f32,
-        out: &mut Vec<EdgeSegment>,
-    ) -> (f64, u32) {
-        let t = Instant::now();
-        let cos = sharp_cutoff_degrees.to_radians().cos();
-        if self.cos_cutoff != Some(cos) {
-            let meshes = &self.meshes;
-            self.trees.par_iter_mut().enumerate().for_each(|(o, t)| {
-                t.prepare_sharp(&meshes[o], cos);
-            });
-            self.cos_cutoff = Some(cos);
-        }
-        let in_view = self.in_view(view);
-        let mut seen = 0;
-        let (found, scratch) = &mut self.scratch;
-        for (o, &visible) in in_view.iter().enumerate() {
-            if !visible {
-                continue;
-            }
-            seen += 1;
-            let to_world = self.transforms[o];
-            let eye_obj = to_world.inverse().transform_point3(eye);
-            found.clear();
-            self.trees[o].query(eye_obj, found, scratch);
-            let m = &self.meshes[o];
-            out.extend(found.iter().map(|&(i, kind)| {
-                let e = &m.edges[i as usize];
-                EdgeSegment {
-                    a: to_world.transform_point3(m.positions[e.v[0] as usize]),
-                    b: to_world.transform_point3(m.positions[e.v[1] as usize]),
-                    kind,
-                    object: o as u32,
-                }
-            }));
-        }
-        (t.elapsed().as_secs_f64() * 1e3, seen)
+    /// in `view` seen from world-space `eye`, at the transforms of the last
+    /// [`Self::set_transforms`]. Returns (milliseconds, objects in view).
+    pub fn geometric_edges(&mut self, eye: Vec3, view: Option<&ViewVolume>, sharp_cutoff_degrees: f32, out: &mut Vec<EdgeSegment>) -> (f64, u32) {
+        self.geometric.edges(&self.shadows.transforms, eye, view, sharp_cutoff_degrees, out)
     }
 
     /// Brings the shadow store up to date with `triples` (the whole current set) and the
@@ -272,28 +401,15 @@ impl EdgeFinder {
         view: Option<&ViewVolume>,
         out: &mut Vec<EdgeSegment>,
     ) -> (ShadowUpdateStats, f64, f64) {
+        let (stats, shadow_ms) = self.shadows.update(triples);
         let t = Instant::now();
-        let scene = ShadowScene {
-            meshes: &self.meshes,
-            trees: &self.trees,
-            rings: &self.rings,
-            bvhs: &self.bvhs,
-            lights: &self.lights,
-            transforms: &self.transforms,
-        };
-        let stats = self.store.update(&scene, triples, &self.moved, &self.light_moved);
-        self.light_moved.iter_mut().for_each(|m| *m = false);
-        self.moved.iter_mut().for_each(|m| *m = false);
-        let shadow_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let in_view = self.in_view(view);
-        self.store.append(out, |o| in_view.get(o as usize).copied().unwrap_or(false));
+        self.shadows.append(view, out);
         (stats, shadow_ms, t.elapsed().as_secs_f64() * 1e3)
     }
 
     /// The shadow store (for inspection and benchmarks).
     pub fn store(&self) -> &ShadowStore {
-        &self.store
+        self.shadows.store()
     }
 }
 

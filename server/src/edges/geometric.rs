@@ -6,10 +6,12 @@
 //! - the silhouette tree over every interior edge (both normals non-zero) prunes subtrees
 //!   whose faces all face the same way;
 //! - sharp edges must be reported exactly where the silhouette tree prunes (every face
-//!   facing the eye), so they get their own tree over the edges sharp at the current
-//!   cut-off, which prunes subtrees facing away and takes subtrees facing the eye whole.
-//!   Edges are kept sorted by `n0 · n1`, so the sharp set of any cut-off is a prefix; the
-//!   tree is rebuilt only when the cut-off changes the prefix;
+//!   facing the eye), so they get their own tree ([`SharpTree`]) over the edges sharp at the
+//!   current cut-off, which prunes subtrees facing away and takes subtrees facing the eye
+//!   whole. Edges are kept sorted by `n0 · n1`, so the sharp set of any cut-off is a prefix;
+//!   the tree is rebuilt only when the cut-off changes the prefix. The cut-off is a session
+//!   setting, so the sharp tree belongs to the querying session while everything else here
+//!   is immutable once built and shared (between sessions, and with the shadow thread);
 //! - boundary edges are discontinuities from everywhere: a plain list.
 use super::brute::is_sharp;
 use super::tree::{EdgeTree, TreeParams};
@@ -18,7 +20,7 @@ use edgepoint_scene::{Mesh, NoProgress, Progress};
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Edge trees and lists of one mesh (object space).
+/// Edge trees and lists of one mesh (object space), immutable once built.
 #[derive(Debug, Clone)]
 pub struct MeshEdgeTrees {
     pub silhouette: EdgeTree,
@@ -26,10 +28,23 @@ pub struct MeshEdgeTrees {
     by_fold: Vec<u32>,
     /// `n0 · n1` of `by_fold`, ascending.
     fold_dots: Vec<f32>,
-    /// The sharp-edge tree for the first `sharp.0` edges of `by_fold`.
-    sharp: (usize, EdgeTree),
     pub boundary: Vec<u32>,
     params: TreeParams,
+}
+
+/// The sharp-edge tree of one mesh at one cut-off: a tree over the first `count` edges of
+/// the mesh's fold order ([`MeshEdgeTrees::prepare_sharp`] keeps it current).
+#[derive(Debug, Clone, Default)]
+pub struct SharpTree {
+    count: usize,
+    tree: EdgeTree,
+}
+
+impl SharpTree {
+    /// Edges in the tree.
+    pub fn edges(&self) -> usize {
+        self.count
+    }
 }
 
 /// Whether an interior edge can be a silhouette or sharp edge at all ([`super::brute::classify`]
@@ -59,7 +74,7 @@ impl MeshEdgeTrees {
         };
         by_fold.par_sort_unstable_by(|&a, &b| dot(a).total_cmp(&dot(b)).then(a.cmp(&b)));
         let fold_dots = by_fold.iter().map(|&i| dot(i)).collect();
-        MeshEdgeTrees { silhouette, by_fold, fold_dots, sharp: (0, EdgeTree::default()), boundary, params }
+        MeshEdgeTrees { silhouette, by_fold, fold_dots, boundary, params }
     }
 
     /// Number of edges sharp at `cos_cutoff` (the prefix of `by_fold` that
@@ -70,32 +85,28 @@ impl MeshEdgeTrees {
         k
     }
 
-    /// Makes the sharp tree match `cos_cutoff`; returns whether it was rebuilt.
-    pub fn prepare_sharp(&mut self, mesh: &Mesh, cos_cutoff: f32) -> bool {
+    /// Makes `sharp` the sharp-edge tree of this mesh at `cos_cutoff`; returns whether it
+    /// was rebuilt.
+    pub fn prepare_sharp(&self, mesh: &Mesh, cos_cutoff: f32, sharp: &mut SharpTree) -> bool {
         let k = self.sharp_count(mesh, cos_cutoff);
-        if k == self.sharp.0 {
+        if k == sharp.count {
             return false;
         }
-        self.sharp = (k, EdgeTree::build(mesh, &self.by_fold[..k], self.params, &NoProgress));
+        *sharp = SharpTree { count: k, tree: EdgeTree::build(mesh, &self.by_fold[..k], self.params, &NoProgress) };
         true
     }
 
     /// Appends (edge, kind) for every discontinuity edge seen from `eye` (object space),
-    /// as [`super::brute::mesh_edges`] does. Call [`Self::prepare_sharp`] for the same
-    /// cut-off first.
-    pub fn query(&self, eye: Vec3, out: &mut Vec<(u32, EdgeKind)>, scratch: &mut Vec<u32>) {
+    /// as [`super::brute::mesh_edges`] does, with `sharp` prepared
+    /// ([`Self::prepare_sharp`]) for the cut-off wanted.
+    pub fn query(&self, sharp: &SharpTree, eye: Vec3, out: &mut Vec<(u32, EdgeKind)>, scratch: &mut Vec<u32>) {
         scratch.clear();
         self.silhouette.silhouettes(eye, scratch);
         out.extend(scratch.iter().map(|&i| (i, EdgeKind::Silhouette)));
         scratch.clear();
-        self.sharp.1.both_facing(eye, scratch);
+        sharp.tree.both_facing(eye, scratch);
         out.extend(scratch.iter().map(|&i| (i, EdgeKind::Sharp)));
         out.extend(self.boundary.iter().map(|&i| (i, EdgeKind::Boundary)));
-    }
-
-    /// Edges in the current sharp tree.
-    pub fn sharp_edges(&self) -> usize {
-        self.sharp.0
     }
 }
 
@@ -128,18 +139,19 @@ mod tests {
     #[test]
     fn query_equals_brute_force_at_several_cutoffs() {
         let m = folded_strip();
-        let mut trees = MeshEdgeTrees::build(&m, &NoProgress);
+        let trees = MeshEdgeTrees::build(&m, &NoProgress);
+        let mut sharp = SharpTree::default();
         let mut scratch = Vec::new();
         for cutoff in [85.0f32, 30.0, 10.0, 2.0, 85.0] {
             let cos = cutoff.to_radians().cos();
-            trees.prepare_sharp(&m, cos);
+            trees.prepare_sharp(&m, cos, &mut sharp);
             for k in 0..300 {
                 let t = k as f32 * 0.7;
                 let eye = Vec3::new(1.2 + 2.0 * t.cos(), 0.5 + (t * 0.3).sin(), 2.0 * t.sin());
                 let mut want = Vec::new();
                 brute::mesh_edges(&m, eye, cos, &mut want);
                 let mut got = Vec::new();
-                trees.query(eye, &mut got, &mut scratch);
+                trees.query(&sharp, eye, &mut got, &mut scratch);
                 want.sort_unstable();
                 got.sort_unstable();
                 assert_eq!(got, want, "cutoff {cutoff} eye {eye}");
@@ -151,10 +163,11 @@ mod tests {
     #[test]
     fn the_sharp_tree_is_rebuilt_only_when_the_cutoff_changes_the_set() {
         let m = folded_strip();
-        let mut trees = MeshEdgeTrees::build(&m, &NoProgress);
-        assert!(trees.prepare_sharp(&m, 5f32.to_radians().cos()));
-        assert!(!trees.prepare_sharp(&m, 5.0001f32.to_radians().cos()));
-        assert!(trees.prepare_sharp(&m, 89f32.to_radians().cos()));
-        assert_eq!(trees.sharp_edges(), 0);
+        let trees = MeshEdgeTrees::build(&m, &NoProgress);
+        let mut sharp = SharpTree::default();
+        assert!(trees.prepare_sharp(&m, 5f32.to_radians().cos(), &mut sharp));
+        assert!(!trees.prepare_sharp(&m, 5.0001f32.to_radians().cos(), &mut sharp));
+        assert!(trees.prepare_sharp(&m, 89f32.to_radians().cos(), &mut sharp));
+        assert_eq!(sharp.edges(), 0);
     }
 }

@@ -16,7 +16,9 @@ use super::output::SessionOutput;
 use super::requests::{build_batches, splitmix64, BatchSpec, RequestRing};
 use super::settings::{camera_from_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
-use crate::edges::{brute::scene_edges, EdgeSegment};
+use super::edge_source::{EdgeSourceStats, SessionEdges};
+use crate::edges::finder::ViewVolume;
+use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, encode_frame};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
@@ -91,8 +93,11 @@ pub(super) struct FrameLoop {
     transforms: Vec<glam::Affine3A>,
     cache: RenderCache,
     epi: Epi,
+    /// Finds the frame's discontinuity segments (edge trees, shadow thread).
+    edge_source: SessionEdges,
     /// The frame's discontinuity segments.
     edges: Vec<EdgeSegment>,
+    edge_stats: EdgeSourceStats,
     holes: HoleFill,
     baseline_holes: BaselineHoles,
     sampler: Sampler,
@@ -142,7 +147,13 @@ impl FrameLoop {
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             cache,
             epi: Epi::new(p.width, p.height),
+            edge_source: SessionEdges::new(
+                p.scene.clone(),
+                p.edge_index.clone(),
+                Box::new(crate::reference::LogProgress::new(&format!("session {}: edge trees", &p.id[..p.id.len().min(8)]))),
+            ),
             edges: Vec::new(),
+            edge_stats: EdgeSourceStats::default(),
             holes: HoleFill::new(p.width, p.height),
             baseline_holes: BaselineHoles::default(),
             sampler: Sampler::new(p.width, p.height, p.seed),
@@ -239,8 +250,15 @@ impl FrameLoop {
         let build = epr || s.overlay != Overlay::None;
         if build {
             let t = Instant::now();
-            self.edges.clear();
-            scene_edges(&self.scene, &self.transforms, self.cam_frame.eye, s.sharp_cutoff_degrees, &mut self.edges);
+            let view = ViewVolume::new(&self.camera, self.width as f32 / self.height as f32);
+            self.edge_stats = self.edge_source.find(
+                &self.transforms,
+                self.cam_frame.eye,
+                &view,
+                &self.feedback.triples,
+                s.sharp_cutoff_degrees,
+                &mut self.edges,
+            );
             self.times.add(STAGE_EDGES, ms_since(t));
         }
         let occluded = self.cache.reproject_points(&self.cam_frame, &mut self.times);
@@ -311,6 +329,9 @@ impl FrameLoop {
                 shadow_penumbral: epi.edges[5],
                 fragments: epi.raster.fragments,
                 culled: epi.raster.culled,
+                edge_trees: self.edge_stats.trees,
+                shadow_update_ms: self.edge_stats.shadow_update_ms,
+                shadow_pairs: self.edge_stats.shadow.pairs as u32,
             }),
             reconstruction: self.settings.reconstruction.to_wire() as i32,
         };

@@ -11,12 +11,14 @@
 //! [`Session::start`] spawns the thread; the session ends when [`Session::close`] is called
 //! or the `Session` is dropped (the service does this when the viewer disconnects). The
 //! thread then exits, dropping the dispatcher, which stops its worker links.
+mod edge_source;
 mod feedback;
 mod frame_loop;
 mod output;
 mod requests;
 mod settings;
 
+pub use edge_source::{EdgeIndexSlot, EdgeSourceStats, SessionEdges, TripleSet};
 pub use feedback::{ObjectSeen, ShadingFeedback, TripleKey, TripleSeen};
 pub use frame_loop::{max_outstanding, SessionCounters, OUTSTANDING_FRAMES, TARGET_SAMPLE_LATENCY};
 pub use output::{SessionOutput, MAX_QUEUED_REJECTIONS};
@@ -59,6 +61,9 @@ pub struct SessionParams {
     pub points_per_pixel: f32,
     /// Seed of the sampler's dithering and the batches' shading seeds.
     pub seed: u64,
+    /// The scene's edge index, shared with the other sessions on the same scene (built by
+    /// the first session that needs it).
+    pub edge_index: EdgeIndexSlot,
 }
 
 /// Default Render Cache size per pixel (DESIGN.md: "a small multiple of the pixel count").

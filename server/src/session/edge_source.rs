@@ -1,0 +1,351 @@
+//! Where a session's discontinuity edges come from each frame (paper 000 §6 and Figure 2's
+//! "edge finder"; DESIGN.md step 2). The frame loop must never wait on it:
+//!
+//! - The edge trees and receiver hierarchies of the scene ([`SceneEdgeIndex`]) take up to
+//!   seconds to build on a big mesh (the dragon: about 1.5 s). They are built on a helper
+//!   thread — once per scene on the server, shared by every session that renders it — and
+//!   until they are ready the frame loop finds edges by brute force (the same edges, more
+//!   slowly), so frames flow from the first one.
+//! - Silhouettes, sharp and boundary edges depend on the eye: the frame thread finds them
+//!   every frame from the trees ([`GeometricFinder`]).
+//! - Shadow edges do not depend on the eye but on the light–blocker–receiver triples the
+//!   workers report and on object moves (§6.5). A new light–blocker pair on a big blocker
+//!   costs far more than a frame (hundreds of milliseconds for the dragon), so the shadow
+//!   store lives on its own thread ([`ShadowFinder`]): the frame loop posts the current
+//!   transforms and triples when they change (latest job wins) and uses the newest shadow
+//!   edges published. After a move the previous shadow edges stay up until the update
+//!   lands, typically a frame later.
+//!
+//! Both the build and the updates run on the [`crate::background`] pool, never on the
+//! global pool the frame loop's per-pixel passes use.
+use super::TripleKey;
+use crate::edges::brute::scene_edges;
+use crate::edges::finder::{GeometricFinder, SceneEdgeIndex, ShadowFinder, ViewVolume};
+use crate::edges::shadow::ShadowUpdateStats;
+use crate::edges::EdgeSegment;
+use edgepoint_scene::{Progress, Scene};
+use glam::{Affine3A, Vec3};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
+use std::time::Instant;
+
+/// The edge index of one scene, built at most once and shared by the sessions on it.
+pub type EdgeIndexSlot = Arc<OnceLock<Arc<SceneEdgeIndex>>>;
+
+/// What [`SessionEdges::find`] did this frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EdgeSourceStats {
+    /// The edge trees were used (false: brute force while they build).
+    pub trees: bool,
+    /// Milliseconds of the shadow updates that finished since the last frame (on the
+    /// shadow thread, not part of this frame's time).
+    pub shadow_update_ms: f64,
+    /// The last finished shadow update.
+    pub shadow: ShadowUpdateStats,
+}
+
+/// A session's edge finding: brute force until the index is ready, then the trees on the
+/// frame thread and the shadow store on its own thread.
+pub struct SessionEdges {
+    scene: Arc<Scene>,
+    /// Delivers the index once built.
+    ready: flume::Receiver<Arc<SceneEdgeIndex>>,
+    running: Option<Running>,
+}
+
+struct Running {
+    geometric: GeometricFinder,
+    shadows: ShadowThread,
+    /// The newest shadow edges taken from the shadow thread.
+    current: Arc<ShadowResult>,
+    /// What was last posted, to post again only on change.
+    posted_transforms: Vec<Affine3A>,
+    posted_triples: usize,
+}
+
+impl SessionEdges {
+    /// Starts building (or waiting for another session's build of) the scene's edge index on
+    /// a helper thread. `progress` reports the build.
+    pub fn new(scene: Arc<Scene>, slot: EdgeIndexSlot, progress: Box<dyn Progress + Send>) -> SessionEdges {
+        let (tx, rx) = flume::bounded(1);
+        let s = scene.clone();
+        let spawned = std::thread::Builder::new().name("edge-index".into()).spawn(move || {
+            let t = Instant::now();
+            let index = slot
+                .get_or_init(|| crate::background::pool().install(|| Arc::new(SceneEdgeIndex::build(&s, &*progress))))
+                .clone();
+            tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "edge index ready");
+            // The session may be gone already: nothing to do then.
+            let _ = tx.send(index);
+        });
+        if let Err(e) = spawned {
+            // Without the thread the session keeps the brute-force finder: slower, same edges.
+            tracing::error!("cannot start the edge-index thread ({e}); edges are found by brute force");
+        }
+        SessionEdges { scene, ready: rx, running: None }
+    }
+
+    /// Whether the edge trees are in use.
+    pub fn trees_ready(&self) -> bool {
+        self.running.is_some()
+    }
+
+    /// This frame's edges into `out` (cleared first): the geometric edges seen from `eye`
+    /// with the objects at `transforms`, and the newest shadow edges of `triples`.
+    pub fn find(
+        &mut self,
+        transforms: &[Affine3A],
+        eye: Vec3,
+        view: &ViewVolume,
+        triples: &dyn TripleSet,
+        sharp_cutoff_degrees: f32,
+        out: &mut Vec<EdgeSegment>,
+    ) -> EdgeSourceStats {
+        out.clear();
+        if self.running.is_none() {
+            if let Ok(index) = self.ready.try_recv() {
+                self.running = Running::start(index);
+            }
+        }
+        let Some(r) = &mut self.running else {
+            scene_edges(&self.scene, transforms, eye, sharp_cutoff_degrees, out);
+            return EdgeSourceStats::default();
+        };
+        r.geometric.edges(transforms, eye, Some(view), sharp_cutoff_degrees, out);
+        if r.posted_transforms != transforms || r.posted_triples != triples.len() {
+            r.posted_transforms.clear();
+            r.posted_transforms.extend_from_slice(transforms);
+            r.posted_triples = triples.len();
+            r.shadows.post(ShadowJob { transforms: transforms.to_vec(), triples: triples.keys() });
+        }
+        let mut stats = EdgeSourceStats { trees: true, ..Default::default() };
+        if let Some((result, ms)) = r.shadows.take() {
+            r.current = result;
+            stats.shadow_update_ms = ms;
+        }
+        stats.shadow = r.current.stats;
+        out.extend_from_slice(&r.current.segments);
+        stats
+    }
+}
+
+/// The triples a session has seen (its feedback map), without copying them every frame.
+pub trait TripleSet {
+    fn len(&self) -> usize;
+    fn keys(&self) -> Vec<TripleKey>;
+}
+
+impl<V> TripleSet for std::collections::HashMap<TripleKey, V> {
+    fn len(&self) -> usize {
+        std::collections::HashMap::len(self)
+    }
+    fn keys(&self) -> Vec<TripleKey> {
+        std::collections::HashMap::keys(self).copied().collect()
+    }
+}
+
+impl Running {
+    fn start(index: Arc<SceneEdgeIndex>) -> Option<Running> {
+        let shadows = ShadowThread::spawn(ShadowFinder::new(index.clone()))?;
+        Some(Running {
+            geometric: GeometricFinder::new(index),
+            shadows,
+            current: Arc::new(ShadowResult::default()),
+            posted_transforms: Vec::new(),
+            posted_triples: usize::MAX,
+        })
+    }
+}
+
+/// The state the shadow store is asked to reach.
+struct ShadowJob {
+    transforms: Vec<Affine3A>,
+    triples: Vec<TripleKey>,
+}
+
+/// What the shadow thread publishes: every stored shadow edge, world space.
+#[derive(Default)]
+struct ShadowResult {
+    segments: Vec<EdgeSegment>,
+    stats: ShadowUpdateStats,
+}
+
+/// Between the frame loop and the shadow thread: the newest job (an older one not yet
+/// started is replaced) and the newest result with the time the updates took.
+#[derive(Default)]
+struct Mailbox {
+    job: Option<ShadowJob>,
+    result: Option<(Arc<ShadowResult>, f64)>,
+    closed: bool,
+}
+
+struct ShadowThread {
+    shared: Arc<(Mutex<Mailbox>, Condvar)>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl ShadowThread {
+    fn spawn(mut finder: ShadowFinder) -> Option<ShadowThread> {
+        let shared: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
+        let s = shared.clone();
+        let thread = std::thread::Builder::new()
+            .name("shadow-edges".into())
+            .spawn(move || loop {
+                let job = {
+                    let (lock, cv) = &*s;
+                    let mut m = lock.lock().unwrap_or_else(|p| p.into_inner());
+                    loop {
+                        if m.closed {
+                            return;
+                        }
+                        if let Some(j) = m.job.take() {
+                            break j;
+                        }
+                        m = cv.wait(m).unwrap_or_else(|p| p.into_inner());
+                    }
+                };
+                let (stats, ms, segments) = crate::background::pool().install(|| {
+                    finder.set_transforms(&job.transforms);
+                    let (stats, ms) = finder.update(job.triples);
+                    let mut segments = Vec::with_capacity(stats.segments);
+                    finder.append(None, &mut segments);
+                    (stats, ms, segments)
+                });
+                let result = Arc::new(ShadowResult { segments, stats });
+                let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
+                // Updates the frame loop has not taken yet add up: it reports their time.
+                let earlier = m.result.take().map_or(0.0, |r| r.1);
+                m.result = Some((result, earlier + ms));
+            })
+            .map_err(|e| tracing::error!("cannot start the shadow-edge thread ({e}); no shadow edges in this session"))
+            .ok()?;
+        Some(ShadowThread { shared, thread: Some(thread) })
+    }
+
+    fn post(&self, job: ShadowJob) {
+        let (lock, cv) = &*self.shared;
+        lock.lock().unwrap_or_else(|p| p.into_inner()).job = Some(job);
+        cv.notify_one();
+    }
+
+    fn take(&self) -> Option<(Arc<ShadowResult>, f64)> {
+        self.shared.0.lock().unwrap_or_else(|p| p.into_inner()).result.take()
+    }
+}
+
+impl Drop for ShadowThread {
+    fn drop(&mut self) {
+        let (lock, cv) = &*self.shared;
+        lock.lock().unwrap_or_else(|p| p.into_inner()).closed = true;
+        cv.notify_one();
+        // An update in progress finishes first (it cannot be interrupted); the session's
+        // thread is ending anyway, so waiting here keeps the thread count bounded.
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::edges::EdgeKind;
+    use edgepoint_scene::NoProgress;
+    use std::collections::HashMap;
+    use std::time::Duration;
+
+    fn view(scene: &Scene) -> ViewVolume {
+        ViewVolume::new(&scene.camera, 1.0)
+    }
+
+    /// Frames until the trees are in use and a shadow update has landed, with a deadline.
+    fn run_until(
+        edges: &mut SessionEdges,
+        scene: &Scene,
+        t: &[Affine3A],
+        triples: &HashMap<TripleKey, ()>,
+        done: impl Fn(&EdgeSourceStats, &[EdgeSegment]) -> bool,
+    ) -> Vec<EdgeSegment> {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut out = Vec::new();
+        loop {
+            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, &mut out);
+            if done(&st, &out) {
+                return out;
+            }
+            assert!(Instant::now() < deadline, "edge source did not get there in time");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    fn sorted_keys(v: &[EdgeSegment]) -> Vec<(u32, EdgeKind, [i64; 6])> {
+        let q = |x: f32| (x * 1e5).round() as i64;
+        let mut k: Vec<_> = v.iter().map(|s| (s.object, s.kind, [q(s.a.x), q(s.a.y), q(s.a.z), q(s.b.x), q(s.b.y), q(s.b.z)])).collect();
+        k.sort_unstable();
+        k
+    }
+
+    #[test]
+    fn brute_force_first_then_trees_and_shadows_equal_to_a_direct_finder() {
+        let scene = Arc::new(edgepoint_scene::builtin::load("cornell-point").unwrap());
+        let slot: EdgeIndexSlot = Arc::default();
+        let mut edges = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let id = |n: &str| scene.object_id(n).unwrap();
+        let mut triples: HashMap<TripleKey, ()> = HashMap::new();
+        for b in ["tallbox", "shortbox"] {
+            for r in ["floor", "back", "redwall"] {
+                triples.insert(TripleKey { light: 0, blocker: id(b), receiver: id(r) }, ());
+            }
+        }
+        // Whatever finder is in use, the geometric edges are the brute-force ones.
+        let mut first = Vec::new();
+        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, &mut first);
+        let mut brute = Vec::new();
+        scene_edges(&scene, &t, scene.camera.eye, 85.0, &mut brute);
+        let geo = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| s.kind.is_geometric()).collect::<Vec<_>>());
+        assert_eq!(geo(&first), sorted_keys(&brute));
+
+        let got = run_until(&mut edges, &scene, &t, &triples, |st, out| st.trees && out.iter().any(|s| !s.kind.is_geometric()));
+        assert!(slot.get().is_some(), "the index went into the shared slot");
+        // The same frame from a finder run directly.
+        let mut direct = crate::edges::finder::EdgeFinder::from_index(slot.get().unwrap().clone());
+        let mut want = Vec::new();
+        direct.frame(&t, scene.camera.eye, Some(&view(&scene)), triples.keys().copied(), 85.0, &mut want);
+        let all = |v: &[EdgeSegment]| sorted_keys(v);
+        // Shadow edges of the thread are not filtered by the view (the rasterizer clips).
+        let mut direct_all = crate::edges::finder::EdgeFinder::from_index(slot.get().unwrap().clone());
+        let mut want_all = Vec::new();
+        direct_all.frame(&t, scene.camera.eye, None, triples.keys().copied(), 85.0, &mut want_all);
+        let shadows = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| !s.kind.is_geometric()).collect::<Vec<_>>());
+        assert_eq!(geo(&got), geo(&want));
+        assert_eq!(shadows(&got), shadows(&want_all));
+        assert!(!all(&got).is_empty());
+
+        // A move: the shadow thread catches up and matches a finder run at the new place.
+        let mut moved = t.clone();
+        let tall = id("tallbox") as usize;
+        moved[tall] = Affine3A::from_translation(Vec3::new(-0.05, 0.0, 0.03)) * t[tall];
+        let want_moved = {
+            let mut f = crate::edges::finder::EdgeFinder::from_index(slot.get().unwrap().clone());
+            let mut w = Vec::new();
+            f.frame(&moved, scene.camera.eye, None, triples.keys().copied(), 85.0, &mut w);
+            shadows(&w)
+        };
+        let got_moved = run_until(&mut edges, &scene, &moved, &triples, |_, out| shadows(out) == want_moved);
+        assert_eq!(shadows(&got_moved), want_moved);
+    }
+
+    #[test]
+    fn a_second_session_reuses_the_index() {
+        let scene = Arc::new(edgepoint_scene::builtin::load("cornell").unwrap());
+        let slot: EdgeIndexSlot = Arc::default();
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let none: HashMap<TripleKey, ()> = HashMap::new();
+        let mut a = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        run_until(&mut a, &scene, &t, &none, |st, _| st.trees);
+        let first = slot.get().unwrap().clone();
+        let mut b = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        run_until(&mut b, &scene, &t, &none, |st, _| st.trees);
+        assert!(Arc::ptr_eq(&first, slot.get().unwrap()));
+    }
+}
