@@ -9,7 +9,7 @@ use edgepoint_scene::camera::CameraFrame;
 use edgepoint_scene::NoProgress;
 use edgepoint_server::reference::{subpixel_position, LogProgress, ReferenceOptions};
 use edgepoint_server::render_cache::{CacheConfig, RenderCache, Sample};
-use edgepoint_server::session::splitmix64;
+use edgepoint_server::session::{splitmix64, TripleKey};
 use edgepoint_server::stage_times::StageTimes;
 use edgepoint_scene::Progress;
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
@@ -48,7 +48,14 @@ impl Staged {
     /// Shades the continuous image positions `picks` (pixel, position) with the scene's
     /// default transforms; returns the samples as the renderer caches them.
     pub fn shade(&self, cam: &CameraFrame, picks: &[Pick], seed: u64) -> Vec<Sample> {
+        self.shade_with_triples(cam, picks, seed).0
+    }
+
+    /// [`Self::shade`], with the light–blocker–receiver triples the shading found (as the
+    /// workers report them to a session: the input of its shadow edges).
+    pub fn shade_with_triples(&self, cam: &CameraFrame, picks: &[Pick], seed: u64) -> (Vec<Sample>, Vec<TripleKey>) {
         let inst = self.loaded.instances(&self.loaded.default_transforms());
+        let mut triples = std::collections::BTreeSet::new();
         let mut out = Vec::with_capacity(picks.len());
         for (c, chunk) in picks.chunks(1 << 16).enumerate() {
             let requests: Vec<RayRequest> = chunk
@@ -60,6 +67,7 @@ impl Staged {
                 })
                 .collect();
             let shaded = shade_batch(&self.loaded, &inst, &self.spec, splitmix64(seed ^ c as u64), &requests);
+            triples.extend(shaded.triples.iter().map(|&[light, blocker, receiver]| TripleKey { light, blocker, receiver }));
             for (s, r) in shaded.samples.iter().zip(&requests) {
                 out.push(match s.hit {
                     Some(h) => Sample { hit: true, position: h.position, normal: h.normal, color: s.rgb, object: h.object, epoch: 0, pixel: r.pixel },
@@ -67,7 +75,7 @@ impl Staged {
                 });
             }
         }
-        out
+        (out, triples.into_iter().collect())
     }
 
     /// The converged reference at `spp` samples per pixel: from the cache in `dir` when an

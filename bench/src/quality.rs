@@ -8,8 +8,10 @@
 //! is reprojected once, and is reconstructed both ways.
 use crate::inprocess::{cache_with, jittered_picks, write_png, Staged};
 use anyhow::{bail, Result};
-use edgepoint_server::edges::brute::scene_edges;
+use edgepoint_server::edges::finder::EdgeFinder;
+use edgepoint_server::edges::EdgeCounts;
 use edgepoint_server::epi::{Epi, InterpOptions, OwnSample, Overlay};
+use edgepoint_server::reference::LogProgress;
 use edgepoint_server::image_metrics::{psnr, ssim};
 use edgepoint_server::epi::spread::BaselineHoles;
 use edgepoint_server::render_cache::holes::HoleFill;
@@ -75,6 +77,9 @@ pub struct QualityArgs {
     /// gain is not the edges' doing).
     #[arg(long)]
     pub no_edges: bool,
+    /// Ablation: geometric edges only (silhouettes, sharp, boundary), no shadow edges.
+    #[arg(long)]
+    pub no_shadow_edges: bool,
     /// Turn the complex filter off.
     #[arg(long)]
     pub no_complex_filter: bool,
@@ -124,20 +129,26 @@ pub fn run(args: QualityArgs) -> Result<()> {
         let cam = staged.camera(w, h);
         let top = args.densities.iter().cloned().fold(0.0, f64::max);
         let picks = jittered_picks(w, h, top, args.seed);
-        let shaded = staged.shade(&cam, &picks, args.seed);
+        let (shaded, triples) = staged.shade_with_triples(&cam, &picks, args.seed);
         let transforms: Vec<Affine3A> = staged.loaded.scene.objects.iter().map(|o| o.transform).collect();
+        // The edges a session has once its edge trees are built and the shadow store has
+        // taken the triples this shading reported (paper §6): silhouettes, sharp and
+        // boundary edges, and the shadow edges on the receivers the triples name.
         let mut edges = Vec::new();
         if !args.no_edges {
-            scene_edges(&staged.loaded.scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+            let mut finder = EdgeFinder::new(&staged.loaded.scene, &LogProgress::new(&format!("edge trees of {tag}")));
+            let triples = if args.no_shadow_edges { Vec::new() } else { triples };
+            finder.frame(&transforms, cam.eye, None, triples, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
         }
+        let edge_counts = EdgeCounts::of(&edges);
         let background = staged.loaded.scene.background;
         let dir = args.out.as_ref().map(|d| d.join(&tag));
         if let Some(d) = &dir {
             std::fs::create_dir_all(d)?;
             write_png(&d.join("reference.png"), w, h, &reference)?;
         }
-        // Hard shadow boundaries (point lights): not yet edges of the EPI (shadow edges come
-        // with the edge trees), so the error there is reported apart.
+        // Hard shadow boundaries (point lights): the error there is reported apart, to show
+        // what the shadow edges do (compare with --no-shadow-edges).
         let shadow = staged.shadow_boundaries(&cam, 2);
         let mut epi = Epi::new(w, h);
         let mut fill = HoleFill::new(w, h);
@@ -230,6 +241,7 @@ pub fn run(args: QualityArgs) -> Result<()> {
                 "pixels_unreached_fallback": rec.interp.fallback, "pixels_spread": rec.spread,
                 "pixels_without_reachable_sample": rec.interp.empty,
                 "edges": edges.len(), "fragments": counts.raster.fragments, "culled": counts.raster.culled,
+                "edge_kinds": { "silhouette": edge_counts.silhouette, "sharp": edge_counts.sharp, "boundary": edge_counts.boundary, "shadow": edge_counts.shadow },
             }));
             if let Some(d) = &dir {
                 let pct = format!("{:04.1}", density * 100.0);
