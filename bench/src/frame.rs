@@ -192,6 +192,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
         let mut last: Option<pb::Frame> = None;
         let mut first_at: Option<Instant> = None;
         let mut dropped = 0u64;
+        let mut first_tree_frame: Option<u64> = None;
         while (totals.len() as u32) < args.frames {
             let ev = tokio::time::timeout(Duration::from_secs(60), client.next_event())
                 .await
@@ -211,6 +212,9 @@ pub fn run(args: FrameArgs) -> Result<()> {
                     totals.push(f.total_ms);
                     samples.push(f.samples_used as f64);
                     dropped = f.frames_dropped;
+                    if first_tree_frame.is_none() && f.edges.as_ref().is_some_and(|e| e.edge_trees) {
+                        first_tree_frame = Some(f.sequence);
+                    }
                     last = Some(f);
                 }
             }
@@ -253,7 +257,10 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 "silhouette": e.silhouette, "sharp": e.sharp, "boundary": e.boundary,
                 "shadow_hard": e.shadow_hard, "shadow_umbral": e.shadow_umbral, "shadow_penumbral": e.shadow_penumbral,
                 "fragments": e.fragments, "culled": e.culled,
+                "edge_trees": e.edge_trees, "shadow_pairs": e.shadow_pairs,
             })),
+            // The first frame found with the edge trees (before it: brute force while they build).
+            "first_frame_with_edge_trees": first_tree_frame,
         });
         if let Some(dir) = &args.out {
             std::fs::create_dir_all(dir)?;

@@ -325,3 +325,38 @@ async fn first_frame_made_with(v: &mut common::Viewer, mode: pb::Reconstruction)
     }
     panic!("no frame made with {mode:?} within 50 frames");
 }
+
+/// Paper §6 in a live session: the edge trees take over from the brute-force finder, the
+/// triples the worker reports become hard shadow edges in the frames, and moving the
+/// shadow's blocker moves them (the shadow thread catches up within a deadline).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shadow_edges_from_reported_triples_reach_the_frames_and_follow_a_move() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 4).await;
+    let mut v = open(&addr, start_msg(pb::builtin_source("cornell-point"), 96, 96)).await.unwrap();
+    v.started().await;
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(60);
+    let shadowed = |f: &pb::Frame| f.edges.as_ref().is_some_and(|e| e.edge_trees && e.shadow_hard > 0 && e.shadow_pairs > 0);
+    let before = loop {
+        let (f, r) = v.frame(10).await;
+        assert!(r.is_empty(), "{r:?}");
+        if shadowed(&f) {
+            break f.edges.unwrap();
+        }
+        assert!(tokio::time::Instant::now() < deadline, "no shadow edges from the trees: {:?}", f.edges);
+    };
+    assert_eq!((before.shadow_umbral, before.shadow_penumbral), (0, 0), "a point light makes hard shadows only");
+    // Lift the tall box: its shadow edges change (the update comes from the shadow thread).
+    let lift = Affine3A::from_translation(Vec3::new(0.0, 0.12, 0.0));
+    v.send(In::Move(pb::ObjectMove { name: "tallbox".into(), transform: Some(pb::affine_to_wire(&lift)), ..Default::default() })).await;
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let (f, r) = v.frame(10).await;
+        assert!(r.is_empty(), "{r:?}");
+        let e = f.edges.unwrap();
+        if f.epoch > 0 && e.shadow_update_ms > 0.0 && e.shadow_hard != before.shadow_hard {
+            break;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "the shadow edges never followed the move: {e:?}");
+    }
+}
