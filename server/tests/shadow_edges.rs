@@ -395,6 +395,16 @@ fn check(su: &Setup, delta_rel: f32, max: usize) -> Report {
                 let ok = all_blocked(pa, na) != all_blocked(pb, nb);
                 if !ok {
                     show("umbral extremal");
+                    if std::env::var("SHOW").is_ok() {
+                        let Light::Area { vertices, .. } = light else { unreachable!() };
+                        let frac = |q: Vec3, nq: Vec3| {
+                            let part = visible_light_part(vertices, q, nq);
+                            let d = dense_samples(&part);
+                            let hid = d.iter().filter(|&&x| inst.occluded(bvh, q, x - q, 1e-6, 1.0 - 1e-5).is_some()).count();
+                            format!("{hid}/{}", d.len())
+                        };
+                        eprintln!("   sides hidden: {} {}", frac(pa, na), frac(pb, nb));
+                    }
                 }
                 rep.umbral_extremal.add(ok);
             }
@@ -429,13 +439,19 @@ const MIN_AGREEMENT: f64 = 0.95;
 /// EEE events — paper §6.3), so both sides see part of the light hidden. Measured 95–100 %.
 const MIN_PENUMBRAL_EXTREMAL: f64 = 0.9;
 
-/// Umbral events (light and blocker on the same side of the plane, §6.3) bound the umbra
-/// only up to where the umbra ends: behind a blocker smaller than the light the umbral
-/// wedges cross and the umbra closes, and beyond that they still mark a change in how the
-/// light is covered (a D1 discontinuity inside the penumbra) but have the light partly
-/// visible on both sides. The paper's algorithm, and ours, emit them there too; measured
-/// 70–93 % of umbral edge points bound full occlusion in these scenes.
-const MIN_UMBRAL_EXTREMAL: f64 = 0.6;
+/// Umbral edges bound the blocker's umbra: the events are labelled by the exact local
+/// tests of [`edgepoint_server::edges::events`] (a VE event only where the light also lies
+/// behind the edge's turned-away face; an EV event only at a reflex silhouette corner), and
+/// each umbral event is cut where it meets another umbral event's effective part, which is
+/// where the umbra closes behind a blocker narrower than the light
+/// ([`edgepoint_server::edges::umbra`]; exact for convex blockers, tested there).
+/// Measured: Cornell box 432/432 points, torus–capsule 542/542 (1099/1099 of 3,000). What
+/// can still miss, on non-convex blockers: an umbra that ends at an EEE event (a light edge
+/// seen between two blocker edges, which the paper's method does not find, §6.3), or an
+/// umbral event that lies outside the umbra from its start because the light shows past
+/// another part of the blocker. The `rooms` scene, whose furniture are unions of overlapping boxes, measures
+/// 93 % (it is not run here: every point costs a scan of the whole light).
+const MIN_UMBRAL_EXTREMAL: f64 = 0.95;
 
 fn assert_agrees(name: &str, a: &Agreement, min_checked: usize, min: f64) {
     eprintln!("{name}: {}/{} = {:.3}", a.agreed, a.checked, a.fraction());
@@ -461,7 +477,7 @@ fn point_light_shadow_edges_agree_with_ray_traced_visibility_on_the_bunny() {
 #[test]
 fn area_light_umbral_and_penumbral_edges_agree_with_ray_traced_visibility_in_the_cornell_box() {
     let su = setup(edgepoint_scene::builtin::load("cornell").unwrap());
-    let r = check(&su, 2e-4, 400);
+    let r = check(&su, 2e-4, 1500);
     eprintln!("{r:?}");
     assert_agrees("cornell umbral event", &r.umbral_event, 50, MIN_AGREEMENT);
     assert_agrees("cornell penumbral event", &r.penumbral_event, 50, MIN_AGREEMENT);
@@ -562,7 +578,7 @@ fn incremental_shadow_updates_equal_full_recomputation_in_the_chains() {
 #[test]
 fn area_light_edges_of_the_torus_on_the_capsule_agree_with_ray_traced_visibility() {
     let su = setup(edgepoint_scene::builtin::load("torus-capsule").unwrap());
-    let r = check(&su, 5e-5, 300);
+    let r = check(&su, 5e-5, 1500);
     eprintln!("{r:?}");
     assert_agrees("torus-capsule umbral event", &r.umbral_event, 50, MIN_AGREEMENT);
     assert_agrees("torus-capsule penumbral event", &r.penumbral_event, 50, MIN_AGREEMENT);
@@ -596,3 +612,4 @@ fn area_light_edges_of_the_torus_on_the_capsule_agree_with_ray_traced_visibility
     eprintln!("penumbra width: {at_contact:.4} next to the contact, {on_floor:.4} on the floor");
     assert!(at_contact < 0.4 * on_floor, "{at_contact} vs {on_floor}");
 }
+

@@ -66,6 +66,39 @@ impl SceneBvh {
     }
 }
 
+/// Reciprocals of direction components that are zero (or too small to invert in f32).
+/// Finite, so the slab products of obvhs' node test stay free of `0 · ∞ = NaN`: a node's
+/// quantisation scale times this stays below `f32::MAX` for scenes up to ~1e8 units across.
+const ZERO_DIRECTION_RECIPROCAL: f32 = 1e30;
+
+/// An obvhs ray whose reciprocal direction agrees with obvhs' own slab ordering.
+///
+/// obvhs picks each node's near and far slab planes by `direction < 0.0` but inverts the
+/// direction with `signum(d) / f32::EPSILON` for `|d| <= f32::EPSILON`, and `signum(-0.0)`
+/// is `-1`: a component of `-0.0` — `-Vec3::Y` is `(-0.0, -1.0, -0.0)`, and inverse
+/// instance transforms of exact axis directions produce them too — got a negative
+/// reciprocal with the planes ordered for a positive one, so every slab interval on that
+/// axis came out empty and the ray missed everything (axis-aligned rays onto the Cornell
+/// box floor, for one). Its `±2^23` stand-in for tiny components also shrank the slab
+/// intervals of nearly axis-aligned rays below the true ones. Here every component gets
+/// its exact reciprocal, with `±0.0` (and anything whose reciprocal overflows) mapped to
+/// `±ZERO_DIRECTION_RECIPROCAL` with the sign obvhs orders the planes by (`+` unless
+/// `d < 0.0`). A ray that lies exactly in a box face's plane stays ambiguous, as its
+/// triangle test is.
+fn make_ray(origin: Vec3A, direction: Vec3A, tmin: f32, tmax: f32) -> Ray {
+    let inv = |d: f32| {
+        if d < 0.0 {
+            (1.0 / d).max(-ZERO_DIRECTION_RECIPROCAL)
+        } else if d > 0.0 {
+            (1.0 / d).min(ZERO_DIRECTION_RECIPROCAL)
+        } else {
+            ZERO_DIRECTION_RECIPROCAL
+        }
+    };
+    let inv_direction = Vec3A::new(inv(direction.x), inv(direction.y), inv(direction.z));
+    Ray { origin, direction, inv_direction, tmin, tmax }
+}
+
 /// The top level for one set of object transforms (one epoch).
 pub struct Instances {
     top: Option<CwBvh>,
@@ -125,19 +158,14 @@ impl Instances {
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let top = self.top.as_ref()?;
-        let ray = Ray::new(origin.into(), dir.into(), tmin, tmax);
+        let ray = make_ray(origin.into(), dir.into(), tmin, tmax);
         let mut best: Option<(u32, u32)> = None;
         let mut top_hit = RayHit::none();
         top.ray_traverse(ray, &mut top_hit, |r, slot| {
             let obj = self.slot_object[slot];
             let inv = &self.to_object[obj as usize];
             let o = &bvh.objects[obj as usize];
-            let local = Ray::new(
-                inv.transform_point3a(r.origin),
-                inv.transform_vector3a(r.direction),
-                r.tmin,
-                r.tmax,
-            );
+            let local = make_ray(inv.transform_point3a(r.origin), inv.transform_vector3a(r.direction), r.tmin, r.tmax);
             let mut h = RayHit::none();
             if o.bvh.ray_traverse(local, &mut h, |lr, id| o.tris[id].intersect(lr)) {
                 best = Some((obj, h.primitive_id));
@@ -156,18 +184,13 @@ impl Instances {
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.
     pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
         let top = self.top.as_ref()?;
-        let ray = Ray::new(origin.into(), dir.into(), tmin, tmax);
+        let ray = make_ray(origin.into(), dir.into(), tmin, tmax);
         let mut blocker = None;
         top.ray_traverse_miss(ray, |r, slot| {
             let obj = self.slot_object[slot];
             let inv = &self.to_object[obj as usize];
             let o = &bvh.objects[obj as usize];
-            let local = Ray::new(
-                inv.transform_point3a(r.origin),
-                inv.transform_vector3a(r.direction),
-                r.tmin,
-                r.tmax,
-            );
+            let local = make_ray(inv.transform_point3a(r.origin), inv.transform_vector3a(r.direction), r.tmin, r.tmax);
             if !o.bvh.ray_traverse_miss(local, |lr, id| o.tris[id].intersect(lr)) {
                 blocker = Some(obj);
                 r.tmin // any value < tmax stops the traversal

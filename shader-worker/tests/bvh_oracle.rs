@@ -143,3 +143,184 @@ fn bunny_matches_brute_force() {
     tf[0] = Affine3A::from_scale_rotation_translation(Vec3::splat(1.3), Quat::from_rotation_y(1.1), Vec3::new(0.01, 0.02, 0.0)) * tf[0];
     check(s, tf, 400, 4);
 }
+
+/// The nearest triangle along the ray with `t >= tmin`, and how far inside it the hit is
+/// (the smallest barycentric coordinate: near 0 the ray grazes an edge).
+fn brute_margin(scene: &Scene, tf: &[Affine3A], o: Vec3, d: Vec3, tmin: f64) -> Option<(u32, u32, f64, f64)> {
+    let mut best: Option<(u32, u32, f64, f64)> = None;
+    for (oi, obj) in scene.objects.iter().enumerate() {
+        for f in 0..obj.mesh.triangles.len() {
+            let [a, b, c] = obj.mesh.triangle(f).map(|v| tf[oi].transform_point3(v).as_dvec3());
+            if let Some(t) = tri_t(o.as_dvec3(), d.as_dvec3(), a, b, c) {
+                if t >= tmin && best.is_none_or(|x| t < x.2) {
+                    best = Some((oi as u32, f as u32, t, barycentric_margin(o.as_dvec3() + d.as_dvec3() * t, a, b, c)));
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The smallest barycentric coordinate of `p` (in the triangle's plane) in triangle `abc`.
+fn barycentric_margin(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let (e1, e2, r) = (b - a, c - a, p - a);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (r1, r2) = (r.dot(e1), r.dot(e2));
+    let den = d11 * d22 - d12 * d12;
+    let v = (d22 * r1 - d12 * r2) / den;
+    let w = (d11 * r2 - d12 * r1) / den;
+    v.min(w).min(1.0 - v - w)
+}
+
+/// The six axis directions, each written two ways: with `+0.0` components and negated
+/// from the opposite direction (`-Vec3::X` has `-0.0` in y and z). obvhs orders a node's
+/// slabs by `direction < 0.0` but took the reciprocal of `-0.0` as negative, so a `-0.0`
+/// component emptied every slab interval on that axis and the ray missed everything.
+fn axis_directions() -> Vec<Vec3> {
+    let mut v = Vec::new();
+    for a in [Vec3::X, Vec3::Y, Vec3::Z] {
+        v.extend([a, -a, -(-a), Vec3::ZERO - a]);
+    }
+    v
+}
+
+/// Rays running exactly along the axes, from random origins in (and around) the scene,
+/// against brute force: the same hit (or both none), at the same distance. A hit within
+/// 1e-5 (barycentric) of a triangle's edge may go either way (f32 against f64); those must
+/// be rare. Also checks `occluded` on the same segments. Returns the number of hits.
+fn check_axis_rays(scene: &Scene, tf: &[Affine3A], per_direction: usize, seed: u64) -> usize {
+    let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
+    let inst = loaded.instances(tf);
+    let (lo, hi) = world_bounds(scene, tf);
+    let size = (hi - lo).length();
+    let tmin = 1e-3 * size;
+    let mut rng = Lcg(seed);
+    let (mut hits, mut grazing, mut rays) = (0, 0, 0);
+    for d in axis_directions() {
+        for _ in 0..per_direction {
+            rays += 1;
+            let u = Vec3::new(rng.f(), rng.f(), rng.f()) * 1.2 - Vec3::splat(0.1);
+            let o = lo + (hi - lo) * u;
+            let got = inst.closest_hit(&loaded.bvh, o, d, tmin, f32::INFINITY);
+            let want = brute_margin(scene, tf, o, d, tmin as f64);
+            let ctx = || format!("origin {o} direction {d} (bits {:x} {:x} {:x}): bvh {got:?} brute {want:?}", d.x.to_bits(), d.y.to_bits(), d.z.to_bits());
+            match (got, want) {
+                (None, None) => {}
+                (Some(g), Some((wo, wt, t, margin))) => {
+                    hits += 1;
+                    assert!((g.t as f64 - t).abs() <= 1e-5 * size as f64, "{}", ctx());
+                    // Another triangle at the same distance is a tie (coincident faces: a
+                    // box standing on the floor, both sides of a zero-thickness plate);
+                    // otherwise only a hit on a shared edge may pick the neighbour.
+                    if (g.object, g.triangle) != (wo, wt) {
+                        let [a, b, c] = scene.objects[g.object as usize]
+                            .mesh
+                            .triangle(g.triangle as usize)
+                            .map(|v| tf[g.object as usize].transform_point3(v).as_dvec3());
+                        let tie = tri_t(o.as_dvec3(), d.as_dvec3(), a, b, c).is_some_and(|t2| (t2 - t).abs() <= 1e-6 * size as f64);
+                        assert!(tie || margin < 1e-5, "{}", ctx());
+                    }
+                    assert!(inst.occluded(&loaded.bvh, o, d, tmin, g.t + 1e-4 * size).is_some(), "{}", ctx());
+                    assert!(inst.occluded(&loaded.bvh, o, d, tmin, g.t - 1e-4 * size).is_none() || margin < 1e-5, "{}", ctx());
+                }
+                (Some(g), None) => {
+                    let [a, b, c] = scene.objects[g.object as usize]
+                        .mesh
+                        .triangle(g.triangle as usize)
+                        .map(|v| tf[g.object as usize].transform_point3(v).as_dvec3());
+                    let m = barycentric_margin(g.position.as_dvec3(), a, b, c);
+                    assert!(m.abs() < 1e-5, "{} (margin {m})", ctx());
+                    grazing += 1;
+                }
+                (None, Some((_, _, _, margin))) => {
+                    assert!(margin < 1e-5, "{}", ctx());
+                    grazing += 1;
+                }
+            }
+        }
+    }
+    assert!(grazing * 1000 <= rays, "{grazing} of {rays} rays graze an edge");
+    hits
+}
+
+fn world_bounds(scene: &Scene, tf: &[Affine3A]) -> (Vec3, Vec3) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for (o, t) in scene.objects.iter().zip(tf) {
+        for p in &o.mesh.positions {
+            let w = t.transform_point3(*p);
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+    }
+    (lo, hi)
+}
+
+/// Rotations by quarter turns, exact (permutation matrices, some with `-0.0` entries) and
+/// from quaternions (entries like `cos(π/2) ≈ -4.4e-8`).
+fn quarter_turns() -> Vec<Affine3A> {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    let exact_y = glam::Mat3::from_cols(Vec3::new(0.0, 0.0, -1.0), Vec3::Y, Vec3::X);
+    let exact_x = glam::Mat3::from_cols(Vec3::X, -Vec3::NEG_Z, -Vec3::Y);
+    vec![
+        Affine3A::from_mat3(exact_y),
+        Affine3A::from_mat3(exact_x),
+        Affine3A::from_mat3(exact_x * exact_y),
+        Affine3A::from_quat(Quat::from_rotation_y(FRAC_PI_2)),
+        Affine3A::from_quat(Quat::from_rotation_x(-FRAC_PI_2)),
+        Affine3A::from_quat(Quat::from_rotation_z(PI)),
+        Affine3A::from_quat(Quat::from_rotation_x(FRAC_PI_2) * Quat::from_rotation_z(FRAC_PI_2)),
+    ]
+}
+
+#[test]
+fn axis_aligned_rays_hit_the_cornell_box_like_brute_force() {
+    let scene = edgepoint_scene::builtin::load("cornell").unwrap();
+    let tf: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+    // The reported case: straight down from above the floor.
+    let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
+    let inst = loaded.instances(&tf);
+    let floor = scene.object_id("floor").unwrap();
+    for d in [Vec3::new(0.0, -1.0, 0.0), -Vec3::Y, Vec3::NEG_Y] {
+        let h = inst.closest_hit(&loaded.bvh, Vec3::new(0.3, 0.1, 0.1), d, 0.0, f32::INFINITY);
+        assert_eq!(h.map(|h| (h.object, h.t)), Some((floor, 0.1)), "direction {d}");
+    }
+    assert!(check_axis_rays(&scene, &tf, 300, 11) > 2000);
+    // The boxes turned by quarter turns about their centres (and scaled), the rest still.
+    let tall = scene.object_id("tallbox").unwrap() as usize;
+    let short = scene.object_id("shortbox").unwrap() as usize;
+    for (k, r) in quarter_turns().into_iter().enumerate() {
+        let mut moved = tf.clone();
+        for (o, s) in [(tall, 0.7), (short, 1.2)] {
+            let (lo, hi) = scene.objects[o].mesh.bounds;
+            let c = (lo + hi) * 0.5;
+            moved[o] = Affine3A::from_translation(c) * r * Affine3A::from_scale(Vec3::splat(s)) * Affine3A::from_translation(-c);
+        }
+        assert!(check_axis_rays(&scene, &moved, 60, 100 + k as u64) > 300);
+    }
+}
+
+#[test]
+fn axis_aligned_rays_hit_flat_and_solid_instances_like_brute_force() {
+    use edgepoint_scene::builtin::shapes;
+    // Flat objects (a quad, a square plate with holes, one triangle) and solid ones (a box,
+    // a sphere), each instanced under every quarter turn, spread along x.
+    let meshes = [
+        quad(0.0, 0.5, true),
+        shapes::grid_plate(1.0, 3, 0.1, 0.0),
+        shapes::polygon(&[Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 0.0, -0.3), Vec3::new(0.0, 0.0, 0.5)]),
+        shapes::cuboid(Vec3::new(-0.4, -0.2, -0.3), Vec3::new(0.4, 0.2, 0.3)),
+        sphere(8, 12),
+    ];
+    for (m, mesh) in meshes.iter().enumerate() {
+        let turns = quarter_turns();
+        let objs = (0..=turns.len()).map(|i| object(&format!("m{m}r{i}"), mesh.clone(), 0.5)).collect();
+        let scene = scene(objs, vec![], 0.0);
+        let mut tf = vec![Affine3A::IDENTITY];
+        tf.extend(turns);
+        for (i, t) in tf.iter_mut().enumerate() {
+            *t = Affine3A::from_translation(Vec3::new(1.5 * i as f32, 0.25 * (i % 3) as f32, 0.0)) * *t;
+        }
+        assert!(check_axis_rays(&scene, &tf, 400, 7 + m as u64) > 100, "mesh {m}");
+    }
+}

@@ -17,6 +17,7 @@ pub mod interval;
 pub mod sample;
 pub mod shadow;
 pub mod tree;
+pub mod umbra;
 pub mod wedge;
 
 /// Default sharp-edge cut-off (paper §6.2: "In our scenes, the cutoff angle is 85°"): an edge

@@ -26,6 +26,7 @@ use super::clip1d::{self, ClipScratch, Seg, Visible};
 use super::events::{find_events, Generator, LocalLight, ShadowEvent, VertexRings};
 use super::face_bvh::FaceBvh;
 use super::geometric::MeshEdgeTrees;
+use super::umbra::{umbra_ends, UmbraEnds};
 use super::wedge::{search, Piece, SearchScratch, Wedge};
 use super::EdgeSegment;
 use crate::session::TripleKey;
@@ -62,6 +63,8 @@ pub struct ShadowUpdateStats {
     pub search_ms: f64,
     /// 1D clipping (ms).
     pub clip_ms: f64,
+    /// Where umbral events stop bounding the umbra ([`super::umbra`], ms).
+    pub umbra_ms: f64,
     /// Light–blocker pairs in the store.
     pub pairs: usize,
     /// Pairs whose events were (re)computed.
@@ -106,6 +109,9 @@ impl Part {
 struct Pair {
     events: Vec<ShadowEvent>,
     parts: BTreeMap<u32, Part>,
+    /// Per umbral event, where it stops bounding the umbra (from the events and the
+    /// blocker's own pieces only).
+    umbra: UmbraEnds,
     /// Visible shadow edges per event.
     visible: Vec<Vec<EdgeSegment>>,
 }
@@ -183,7 +189,13 @@ struct ClipBuffers {
     visible: Vec<Visible>,
 }
 
-fn clip_event(ev: &ShadowEvent, i: usize, parts: &BTreeMap<u32, Part>, world: &DAffine3, buf: &mut ClipBuffers) -> Vec<EdgeSegment> {
+/// Visible runs narrower than this (in the event's ray parameter `u`, a millionth of the
+/// event's fan) are dropped: they are slivers where pieces that should meet leave a
+/// hair's gap (e.g. two umbra-ending crossings from neighbouring events), far below a
+/// pixel.
+const MIN_RUN: f64 = 1e-6;
+
+fn clip_event(ev: &ShadowEvent, i: usize, parts: &BTreeMap<u32, Part>, umbra: &UmbraEnds, world: &DAffine3, buf: &mut ClipBuffers) -> Vec<EdgeSegment> {
     let ClipBuffers { clip: cs, segs, tags, visible: vis } = buf;
     segs.clear();
     tags.clear();
@@ -194,6 +206,11 @@ fn clip_event(ev: &ShadowEvent, i: usize, parts: &BTreeMap<u32, Part>, world: &D
             tags.push((obj, p.output && part.receiver));
         }
     }
+    // Past where an umbral event stops bounding the umbra it shows nothing.
+    for s in umbra.of(i) {
+        segs.push(*s);
+        tags.push((u32::MAX, false));
+    }
     if segs.is_empty() {
         return Vec::new();
     }
@@ -202,7 +219,7 @@ fn clip_event(ev: &ShadowEvent, i: usize, parts: &BTreeMap<u32, Part>, world: &D
     let mut out = Vec::new();
     for v in vis.iter() {
         let (obj, output) = tags[v.piece];
-        if !output {
+        if !output || v.u1 - v.u0 < MIN_RUN {
             continue;
         }
         let s = &segs[v.piece];
@@ -264,12 +281,22 @@ impl ShadowStore {
                     stats.add_search(c);
                 }
                 stats.search_ms += ms(t);
+                let t = Instant::now();
+                pair.umbra = match (&scene.lights[l as usize], pair.parts.get(&b)) {
+                    (Light::Area { vertices, .. }, Some(own)) => {
+                        let mesh = &scene.meshes[b as usize];
+                        umbra_ends(&pair.events, |i| own.of(i), vertices.len(), |e, w| mesh.edges[e as usize].v.contains(&w))
+                    }
+                    _ => UmbraEnds::default(),
+                };
+                stats.umbra_ms += ms(t);
                 let parts = &pair.parts;
                 let events = &pair.events;
+                let umbra = &pair.umbra;
                 let t = Instant::now();
                 pair.visible = (0..events.len())
                     .into_par_iter()
-                    .map_init(ClipBuffers::default, |s, i| clip_event(&events[i], i, parts, &world, s))
+                    .map_init(ClipBuffers::default, |s, i| clip_event(&events[i], i, parts, umbra, &world, s))
                     .collect();
                 stats.clip_ms += ms(t);
                 stats.events_clipped += events.len();
@@ -321,10 +348,11 @@ impl ShadowStore {
             }
             let parts = &pair.parts;
             let events = &pair.events;
+            let umbra = &pair.umbra;
             let t = Instant::now();
             let redone: Vec<(usize, Vec<EdgeSegment>)> = idx
                 .par_iter()
-                .map_init(ClipBuffers::default, |s, &i| (i, clip_event(&events[i], i, parts, &world, s)))
+                .map_init(ClipBuffers::default, |s, &i| (i, clip_event(&events[i], i, parts, umbra, &world, s)))
                 .collect();
             stats.clip_ms += ms(t);
             stats.events_clipped += redone.len();

@@ -186,6 +186,13 @@ impl Wedge {
         }
     }
 
+    /// A segment clipped to the part of the wedge beyond the blocker (`α, β ≥ 0`, and
+    /// `μ ≥ 1` for a fan at the light), or `None` if nothing is left.
+    pub fn clip_beyond(&self, a: DVec2, b: DVec2) -> Option<(DVec2, DVec2)> {
+        let quadrant = [(DVec2::new(1.0, 0.0), 0.0), (DVec2::new(0.0, 1.0), 0.0), (DVec2::new(1.0, 1.0), self.mu_blocker)];
+        clip_halfplanes(a, b, &quadrant).filter(|(a, b)| a != b)
+    }
+
     /// Lower bound of `μ` over a box, and whether the box can meet the wedge at all
     /// (straddles the plane and overlaps the wedge's region).
     fn node_bound(&self, lo: &[f32; 3], hi: &[f32; 3]) -> Option<f64> {
