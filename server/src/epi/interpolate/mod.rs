@@ -17,11 +17,32 @@
 //! it takes the unconstrained mean of its window instead, as the Render Cache baseline
 //! would); its weight stays 0 so sampling treats it as unreached.
 //!
-//! Bit-sliced like [`super::reach`]: for 64 pixels of a row and one window offset, the
-//! pixels that reach a usable sample there are one AND of three words; the work per pixel
-//! is then proportional to the samples it actually uses. (A separable row/column filter
-//! for pixels whose windows hold no edge was measured slower than this at every sample
-//! density the renderer runs at, and removed.)
+//! Bit-sliced like [`super::reach`]: for 64 pixels of a row (a word) and one window offset,
+//! the pixels that take the sample there are one AND of three words (the pixels needing
+//! interpolation, the usable-sample plane shifted by the offset, the reachability plane;
+//! complex pixels take every sample). A word is then summed one of two ways, by the number of
+//! (pixel, sample) pairs it has:
+//!
+//! - **sparse**: pair by pair — words with few pixels to interpolate (dense sampling, where
+//!   only edge-ambiguous samples and holes need it) or few samples;
+//! - **dense**: all 64 pixels for every offset, each offset a contiguous pass over planar R,
+//!   G, B rows (converted once per row, read 25 times) with the pixel's weight for the sample
+//!   — the kernel weight or 0 — as a multiplier or, with AVX-512, a mask register, and the
+//!   four sums of a chunk of pixels held in registers across the 25 offsets; then the mean or
+//!   own colour of all pixels at once.
+//!
+//! Both add the same products in the same order as a per-pixel loop, so the result does not
+//! depend on the path or on the instruction set the dense path is compiled for ([`Isa`]:
+//! SSE2, AVX2 or AVX-512, chosen at run time) — bit for bit; the tests check every path
+//! against a per-pixel loop. A sample colour that is not finite (a failed shade) is read as
+//! black by its neighbours (its own pixel still shows it): the dense path's zero weights must
+//! not meet an infinity.
+//!
+//! Measured with `edgepoint-bench epi` (cornell-point, 512², one core with AVX-512): the
+//! dense path wins from ~32 pairs per word, so at 20 % and 5 % sample density almost every
+//! word takes it (interpolation ~1.4 ms, from ~3 ms pair by pair); AVX2 from ~160 pairs, and
+//! SSE2 never. Skipping the reachability masks in words with no edge near was measured
+//! slower: at that image size an edge lies within reach of ~80 % of the words.
 use super::code::EpiPixel;
 use super::reach::{around, offset, Reach};
 use super::Flags;
@@ -108,9 +129,10 @@ const BAND_ROWS: usize = 16;
 /// inside the row (16: the rows' words stay aligned alike).
 const PAD: usize = 16;
 
-/// The instruction set the interpolation is compiled for, chosen per call from what the CPU
-/// has (the build targets baseline x86-64). It sets how many pixels the dense path sums at a
-/// time ([`Isa::chunk`]) and when the sparse path is cheaper ([`Isa::sparse_pairs`]).
+/// The instruction set the interpolation is compiled for, chosen from what the CPU has (the
+/// build targets baseline x86-64). It sets how the dense path keeps its lane masks, how many
+/// pixels it sums at a time, and how many (pixel, sample) pairs a word needs for the dense
+/// path to beat the sparse one — measured with `edgepoint-bench epi` (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Isa {
     /// SSE2 (and any other architecture).
@@ -132,7 +154,11 @@ impl Isa {
             let cap = match std::env::var("EDGEPOINT_SIMD").as_deref() {
                 Ok("baseline") => Isa::Baseline,
                 Ok("avx2") => Isa::Avx2,
-                _ => Isa::Avx512,
+                Ok("avx512") | Err(_) => Isa::Avx512,
+                Ok(other) => {
+                    tracing::warn!("EDGEPOINT_SIMD={other:?} is not baseline, avx2 or avx512: ignored");
+                    Isa::Avx512
+                }
             };
             let isa = *[Isa::Avx512, Isa::Avx2].iter().find(|i| **i as u8 <= cap as u8 && i.available()).unwrap_or(&Isa::Baseline);
             tracing::debug!("interpolation compiled for {isa:?}");
@@ -176,6 +202,24 @@ pub fn interpolate(input: &InterpInput, image: &mut [Vec3], weights: &mut [f32],
 /// [`interpolate`] compiled for `isa`, which must be [`Isa::available`]. Every `isa` gives
 /// the same result, bit for bit.
 pub fn interpolate_with(isa: Isa, input: &InterpInput, image: &mut [Vec3], weights: &mut [f32], filled: &mut [u64], holes: &mut [u64]) -> InterpCounts {
+    run(isa, isa.dense_from(), input, image, weights, filled, holes)
+}
+
+impl Isa {
+    /// The (pixel, sample) pairs from which a word takes the dense path (measured with
+    /// `edgepoint-bench epi`): SSE2 never, as its dense path never beats the sparse one.
+    fn dense_from(self) -> u32 {
+        match self {
+            Isa::Baseline => u32::MAX,
+            Isa::Avx2 => 160,
+            Isa::Avx512 => 32,
+        }
+    }
+}
+
+/// [`interpolate_with`], words with at least `dense_from` (pixel, sample) pairs taking the
+/// dense path.
+fn run(isa: Isa, dense_from: u32, input: &InterpInput, image: &mut [Vec3], weights: &mut [f32], filled: &mut [u64], holes: &mut [u64]) -> InterpCounts {
     assert!(isa.available(), "{isa:?} is not available on this CPU");
     let (w, words) = (input.flags.width, input.flags.words);
     if w == 0 || words == 0 {
@@ -188,17 +232,17 @@ pub fn interpolate_with(isa: Isa, input: &InterpInput, image: &mut [Vec3], weigh
         .zip(holes.par_chunks_mut(BAND_ROWS * words))
         .enumerate()
         .map_init(
-            || Scratch { rows: PlanarRows::new(w), sparse: SparseSums([[0.0; 4]; 64]) },
-            |rows, (b, (((img, wt), fl), ho))| {
+            || Scratch { rows: PlanarRows::new(w), sparse: SparseSums([[0.0; 4]; 64]), dense_from },
+            |scratch, (b, (((img, wt), fl), ho))| {
                 let band = Band { y0: b * BAND_ROWS, img, wt, fl, ho };
                 match isa {
-                    Isa::Baseline => interpolate_band::<16, 96>(input, rows, band),
+                    Isa::Baseline => interpolate_band::<16, ByTable>(input, scratch, band),
                     // SAFETY: `isa.available()` was asserted: the CPU has the features.
                     #[cfg(target_arch = "x86_64")]
-                    Isa::Avx2 => unsafe { interpolate_band_avx2(input, rows, band) },
+                    Isa::Avx2 => unsafe { interpolate_band_avx2(input, scratch, band) },
                     // SAFETY: as above.
                     #[cfg(target_arch = "x86_64")]
-                    Isa::Avx512 => unsafe { interpolate_band_avx512(input, rows, band) },
+                    Isa::Avx512 => unsafe { interpolate_band_avx512(input, scratch, band) },
                     #[cfg(not(target_arch = "x86_64"))]
                     _ => unreachable!("asserted available"),
                 }
@@ -207,25 +251,28 @@ pub fn interpolate_with(isa: Isa, input: &InterpInput, image: &mut [Vec3], weigh
         .reduce(InterpCounts::default, |a, b| a + b)
 }
 
-/// [`interpolate_band`] compiled for x86-64-v3: chunks of 16 pixels (each sum two registers).
+/// [`interpolate_band`] compiled for x86-64-v3: chunks of 16 pixels (each sum two registers)
+/// and lane masks from [`LANE_ONES`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-fn interpolate_band_avx2(input: &InterpInput, rows: &mut Scratch, band: Band) -> InterpCounts {
-    interpolate_band::<16, 64>(input, rows, band)
+fn interpolate_band_avx2(input: &InterpInput, scratch: &mut Scratch, band: Band) -> InterpCounts {
+    interpolate_band::<16, ByTable>(input, scratch, band)
 }
 
 /// [`interpolate_band`] compiled for x86-64-v4: chunks of a whole word (each sum four of the
-/// 32 registers, the lane masks in mask registers).
+/// 32 registers) and lane masks in mask registers.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,bmi1,bmi2,lzcnt,popcnt")]
-fn interpolate_band_avx512(input: &InterpInput, rows: &mut Scratch, band: Band) -> InterpCounts {
-    interpolate_band::<64, 48>(input, rows, band)
+fn interpolate_band_avx512(input: &InterpInput, scratch: &mut Scratch, band: Band) -> InterpCounts {
+    interpolate_band::<64, ByMaskRegisters>(input, scratch, band)
 }
 
-/// Per-task buffers.
+/// Per-task buffers and settings.
 struct Scratch {
     rows: PlanarRows,
     sparse: SparseSums,
+    /// See [`run`].
+    dense_from: u32,
 }
 
 /// The output rows of one parallel task, from row `y0`.
@@ -280,10 +327,10 @@ fn valid_bits(w: usize, j: usize) -> u64 {
     }
 }
 
-/// Rows `y0 ..` (as many as the band holds). The dense path sums `C` pixels at a time; words
-/// with at most `SPARSE` (pixel, sample) pairs take the sparse path.
+/// Rows `y0 ..` (as many as the band holds). The dense path sums `C` pixels at a time with
+/// `K`.
 #[inline(always)]
-fn interpolate_band<const C: usize, const SPARSE: u32>(input: &InterpInput, scratch: &mut Scratch, band: Band) -> InterpCounts {
+fn interpolate_band<const C: usize, K: DenseSums>(input: &InterpInput, scratch: &mut Scratch, band: Band) -> InterpCounts {
     let f = input.flags;
     let (w, h, words) = (f.width, f.height, f.words);
     let Band { y0, img, wt, fl, ho } = band;
@@ -296,25 +343,25 @@ fn interpolate_band<const C: usize, const SPARSE: u32>(input: &InterpInput, scra
             let plan = WordPlan::new(input, y, j);
             let (x0, n) = (64 * j, (w - 64 * j).min(64));
             let out = WordOut { img: &mut img[x0..x0 + n], wt: &mut wt[x0..x0 + n], own: &color[y * w + x0..][..n] };
-            let (summed, mut counts_word) = if plan.need() == 0 {
+            let need = plan.need();
+            let summed = if need == 0 {
                 // Every pixel shows its own sample (most words of dense sampling).
                 out.img.copy_from_slice(out.own);
                 out.wt.fill(input.kernel.0[12]);
-                (0, InterpCounts::default())
+                0
             } else {
                 let bits = word_bits(input, y, j, &plan);
                 let pairs: u32 = bits.iter().map(|b| b.count_ones()).sum();
-                if pairs <= SPARSE {
-                    scratch.sparse.gather(color, w, y, x0, plan.need(), &bits, &input.kernel.0);
-                    (finish_sparse(input, &plan, &scratch.sparse, out), InterpCounts::default())
+                if pairs < scratch.dense_from {
+                    scratch.sparse.gather(color, w, y, x0, need, &bits, &input.kernel.0);
+                    finish_sparse(input, &plan, &scratch.sparse, out)
                 } else {
                     let win = scratch.rows.window(color, w, h, y);
-                    let src = win.word(j);
-                    (dense_word::<C>(input, &plan, &src, &bits, win.centre_finite(), out), InterpCounts::default())
+                    dense_word::<C, K>(input, &plan, &win.word(j), &bits, win.centre_finite(), out)
                 }
             };
-            let need = plan.need();
             let missing = need & !summed;
+            let mut counts_word = InterpCounts::default();
             let mut still_missing = missing;
             if missing != 0 && input.options.fallback {
                 still_missing = fallback(input, &mut scratch.sparse, y, j, missing, &mut img[x0..x0 + n]);
@@ -517,6 +564,117 @@ struct WordOut<'a> {
     own: &'a [Vec3],
 }
 
+/// The dense path's sums of `C` pixels from bit `shift` of a word: `[Σ w · R, Σ w · G,
+/// Σ w · B, Σ w]` over the window offsets `k` whose bit each has in `bits[k]`, in window
+/// order, with one product and one sum per sample taken — the same operations in the same
+/// order as [`SparseSums::gather`] or a per-pixel loop, so the results are equal bit for bit.
+/// The sums stay in registers across the 25 offsets.
+trait DenseSums {
+    /// # Safety
+    /// The CPU must have the instruction set the implementation is written for.
+    unsafe fn sums<const C: usize>(src: &WordSource, bits: &[u64; 25], kernel: &[f32; 25], shift: usize) -> [[f32; C]; 4];
+}
+
+/// Any instruction set: each byte of lane bits selects a row of 0s and 1s to multiply the
+/// weight by, so that a pixel's weight for a sample is a multiplier rather than a branch or a
+/// select of the sum (which keeps the sums in registers): 2 loads and 2 products per 16
+/// pixels instead of a broadcast, compare and widening. Exact: `wk · 1 == wk`, and
+/// `s + 0 · c == s` for finite `c` (see [`PlanarRows`]) and sums that are never -0.
+struct ByTable;
+
+impl DenseSums for ByTable {
+    #[inline(always)]
+    unsafe fn sums<const C: usize>(src: &WordSource, bits: &[u64; 25], kernel: &[f32; 25], shift: usize) -> [[f32; C]; 4] {
+        let (mut ar, mut ag, mut ab, mut aw) = ([0f32; C], [0f32; C], [0f32; C], [0f32; C]);
+        for (dy, rgb) in src.0.iter().enumerate() {
+            for dx in 0..5 {
+                let k = 5 * dy + dx;
+                let wk = kernel[k];
+                let at = shift + dx;
+                let part = |p: &[f32; 68]| -> [f32; C] { p[at..at + C].try_into().unwrap() };
+                let (r, g, b) = (part(rgb[0]), part(rgb[1]), part(rgb[2]));
+                let mut ones = [0f32; C];
+                for (q, o) in ones.chunks_exact_mut(8).enumerate() {
+                    o.copy_from_slice(&LANE_ONES[((bits[k] >> (shift + 8 * q)) & 0xFF) as usize]);
+                }
+                for l in 0..C {
+                    let wl = wk * ones[l];
+                    ar[l] += wl * r[l];
+                    ag[l] += wl * g[l];
+                    ab[l] += wl * b[l];
+                    aw[l] += wl;
+                }
+            }
+        }
+        [ar, ag, ab, aw]
+    }
+}
+
+/// AVX-512: the lane bits are a mask register, and each product is added under it (a pixel
+/// without a sample at an offset keeps its sums untouched): per 16 pixels and offset, 3
+/// products and 4 masked sums.
+#[cfg(target_arch = "x86_64")]
+struct ByMaskRegisters;
+
+#[cfg(target_arch = "x86_64")]
+impl DenseSums for ByMaskRegisters {
+    #[inline(always)]
+    unsafe fn sums<const C: usize>(src: &WordSource, bits: &[u64; 25], kernel: &[f32; 25], shift: usize) -> [[f32; C]; 4] {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { sums_avx512::<C>(src, bits, kernel, shift) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn sums_avx512<const C: usize>(src: &WordSource, bits: &[u64; 25], kernel: &[f32; 25], shift: usize) -> [[f32; C]; 4] {
+    use std::arch::x86_64::{__m512, _mm512_loadu_ps, _mm512_mask_add_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_setzero_ps, _mm512_storeu_ps};
+    let mut acc = [[_mm512_setzero_ps(); 4]; 4];
+    let groups = C / 16;
+    for (dy, rgb) in src.0.iter().enumerate() {
+        for dx in 0..5 {
+            let k = 5 * dy + dx;
+            let wk = _mm512_set1_ps(kernel[k]);
+            for (q, a) in acc.iter_mut().enumerate().take(groups) {
+                let m = (bits[k] >> (shift + 16 * q)) as u16;
+                let at = shift + 16 * q + dx;
+                for (ch, p) in rgb.iter().enumerate() {
+                    let c: &[f32; 16] = p[at..at + 16].try_into().unwrap();
+                    // SAFETY: `c` holds the 16 floats read.
+                    let v: __m512 = unsafe { _mm512_loadu_ps(c.as_ptr()) };
+                    a[ch] = _mm512_mask_add_ps(a[ch], m, a[ch], _mm512_mul_ps(wk, v));
+                }
+                a[3] = _mm512_mask_add_ps(a[3], m, a[3], wk);
+            }
+        }
+    }
+    let mut out = [[0f32; C]; 4];
+    for (q, a) in acc.iter().enumerate().take(groups) {
+        for (o, v) in out.iter_mut().zip(a) {
+            let o: &mut [f32; 16] = (&mut o[16 * q..16 * q + 16]).try_into().unwrap();
+            // SAFETY: `o` holds the 16 floats written.
+            unsafe { _mm512_storeu_ps(o.as_mut_ptr(), *v) };
+        }
+    }
+    out
+}
+
+/// Per byte of lane bits, 1.0 for the lanes set and 0.0 for the others.
+static LANE_ONES: [[f32; 8]; 256] = {
+    let mut t = [[0f32; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut l = 0;
+        while l < 8 {
+            t[m][l] = if m & (1 << l) != 0 { 1.0 } else { 0.0 };
+            l += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
 /// The dense path: every pixel of the word, `C` at a time (a divisor of 64), sums
 /// `kernel[k] · colour` and `kernel[k]` over the window offsets `k` whose bit it has in
 /// `bits[k]`, in window order, with one product and one sum per sample taken — the same
@@ -524,63 +682,44 @@ struct WordOut<'a> {
 /// are equal bit for bit. The sums stay in registers; each chunk then takes its own colour,
 /// window mean or the background, all lanes at once. Returns the pixels with a positive sum.
 #[inline(always)]
-fn dense_word<const C: usize>(input: &InterpInput, plan: &WordPlan, src: &WordSource, bits: &[u64; 25], centre_finite: bool, out: WordOut) -> u64 {
+fn dense_word<const C: usize, K: DenseSums>(input: &InterpInput, plan: &WordPlan, src: &WordSource, bits: &[u64; 25], centre_finite: bool, out: WordOut) -> u64 {
     let kernel = &input.kernel.0;
     let centre_weight = kernel[12];
     let bg = input.background.to_array();
-    // The lane masks 16 at a time, read from memory as they are used.
-    let masks: [[u16; 4]; 25] = std::array::from_fn(|k| std::array::from_fn(|q| (bits[k] >> (16 * q)) as u16));
     let any = bits.iter().fold(0, |a, b| a | b);
     let WordOut { img, wt, own } = out;
     let n = img.len();
     let mut summed = 0u64;
     for c in 0..64 / C {
         let shift = C * c;
-        // The four sums of the chunk, held in registers across the 25 offsets.
-        let (mut ar, mut ag, mut ab, mut aw) = ([0f32; C], [0f32; C], [0f32; C], [0f32; C]);
-        if any >> shift & (u64::MAX >> (64 - C)) != 0 {
-            for (dy, rgb) in src.0.iter().enumerate() {
-                for dx in 0..5 {
-                    let k = 5 * dy + dx;
-                    let wk = kernel[k];
-                    let at = shift + dx;
-                    let part = |p: &[f32; 68]| -> [f32; C] { p[at..at + C].try_into().unwrap() };
-                    let (r, g, b) = (part(rgb[0]), part(rgb[1]), part(rgb[2]));
-                    for q in 0..C / 16 {
-                        let m = masks[k][shift / 16 + q];
-                        for l in 16 * q..16 * q + 16 {
-                            // The pixel's weight for this sample, or 0: a multiplier rather
-                            // than a branch or a select of the sum, which keeps the sums in
-                            // registers. Exact: `s + 0 · c == s` for finite `c` (see
-                            // `PlanarRows`) and sums that are never -0.
-                            let wl = if m & (1 << (l - 16 * q)) != 0 { wk } else { 0.0 };
-                            ar[l] += wl * r[l];
-                            ag[l] += wl * g[l];
-                            ab[l] += wl * b[l];
-                            aw[l] += wl;
-                        }
-                    }
-                }
-            }
-        }
+        let [ar, ag, ab, aw] = if any >> shift & (u64::MAX >> (64 - C)) != 0 {
+            // SAFETY: `K` runs on this CPU (see `interpolate_with`).
+            unsafe { K::sums::<C>(src, bits, kernel, shift) }
+        } else {
+            [[0.0; C]; 4]
+        };
         // Own colour (the window's centre), window mean or background.
         let centre = |p: &[f32; 68]| -> [f32; C] { p[2 + shift..2 + shift + C].try_into().unwrap() };
         let (r, g, b) = (centre(src.0[2][0]), centre(src.0[2][1]), centre(src.0[2][2]));
-        let own_c = plan.own >> shift;
         let (mut or, mut og, mut ob, mut ow) = ([0f32; C], [0f32; C], [0f32; C], [0f32; C]);
-        let mut got = 0u64;
-        for l in 0..C {
-            let o = own_c & (1 << l) != 0;
-            let s = aw[l];
-            let f = s > 0.0;
-            let inv = 1.0 / s;
-            or[l] = if o { r[l] } else if f { ar[l] * inv } else { bg[0] };
-            og[l] = if o { g[l] } else if f { ag[l] * inv } else { bg[1] };
-            ob[l] = if o { b[l] } else if f { ab[l] * inv } else { bg[2] };
-            ow[l] = if o { centre_weight } else { s };
-            got |= u64::from(f) << l;
+        for q in 0..C / 16 {
+            // 16 lanes at a time, as the masks: bit tests and the bits of a comparison stay
+            // in one register.
+            let own = (plan.own >> (shift + 16 * q)) as u16;
+            let mut got = 0u16;
+            for l in 16 * q..16 * q + 16 {
+                let o = own & (1 << (l - 16 * q)) != 0;
+                let s = aw[l];
+                let f = s > 0.0;
+                let inv = 1.0 / s;
+                or[l] = if o { r[l] } else if f { ar[l] * inv } else { bg[0] };
+                og[l] = if o { g[l] } else if f { ag[l] * inv } else { bg[1] };
+                ob[l] = if o { b[l] } else if f { ab[l] * inv } else { bg[2] };
+                ow[l] = if o { centre_weight } else { s };
+                got |= u16::from(f) << (l - 16 * q);
+            }
+            summed |= u64::from(got) << (shift + 16 * q);
         }
-        summed |= got << shift;
         if shift + C <= n {
             let img: &mut [Vec3; C] = (&mut img[shift..shift + C]).try_into().unwrap();
             for l in 0..C {

@@ -261,15 +261,23 @@ impl Reach {
         }
         // Before the centre: the reversed offset (window index 24 - k), stored by the pixel
         // pointed to, in the row two above (k = 0..5), one above (k = 5..10) or this one
-        // (k = 10, 11). Written as loops over constant offsets, without a division by 5.
-        for (dy, ks) in [(2, 0..5), (1, 5..10), (0, 10..12)] {
-            let Some(yy) = y.checked_sub(dy) else { continue };
-            let rows = &self.planes[yy * REACH_PLANES * words..][..REACH_PLANES * words];
-            for k in ks {
-                let row = &rows[(24 - k - 13) * words..][..words];
-                out[k] = funnel(around(row, j), (k % 5) as i32 - 2);
-            }
-        }
+        // (k = 10, 11). Written out offset by offset: shifts by constants, no division by 5.
+        let plane = |dy: usize, k: usize| -> [u64; 3] {
+            let Some(yy) = y.checked_sub(dy) else { return [0; 3] };
+            around(&self.planes[(yy * REACH_PLANES + 24 - k - 13) * words..][..words], j)
+        };
+        out[0] = funnel(plane(2, 0), -2);
+        out[1] = funnel(plane(2, 1), -1);
+        out[2] = funnel(plane(2, 2), 0);
+        out[3] = funnel(plane(2, 3), 1);
+        out[4] = funnel(plane(2, 4), 2);
+        out[5] = funnel(plane(1, 5), -2);
+        out[6] = funnel(plane(1, 6), -1);
+        out[7] = funnel(plane(1, 7), 0);
+        out[8] = funnel(plane(1, 8), 1);
+        out[9] = funnel(plane(1, 9), 2);
+        out[10] = funnel(plane(0, 10), -2);
+        out[11] = funnel(plane(0, 11), -1);
         out
     }
 
