@@ -12,6 +12,7 @@ use crate::stats::median;
 use anyhow::{bail, Result};
 use edgepoint_server::edges::brute::scene_edges;
 use edgepoint_server::epi::reach::scalar::ScalarReach;
+use edgepoint_server::epi::interpolate::Isa;
 use edgepoint_server::epi::{Epi, InterpOptions, STAGE_ANTIALIAS, STAGE_INTERPOLATE, STAGE_REACH};
 use edgepoint_server::render_cache::RenderCache;
 use edgepoint_server::stage_times::StageTimes;
@@ -30,7 +31,7 @@ pub struct EpiArgs {
     pub sizes: Vec<u32>,
     /// Fractions of pixels holding a sample (comma-separated); 1 is the interactive steady
     /// state, lower values leave most pixels to interpolation.
-    #[arg(long, value_delimiter = ',', default_value = "1,0.2")]
+    #[arg(long, value_delimiter = ',', default_value = "1,0.2,0.05")]
     pub densities: Vec<f64>,
     /// Timed repetitions per configuration (medians are reported).
     #[arg(long, default_value_t = 15)]
@@ -72,7 +73,12 @@ pub fn run(args: EpiArgs) -> Result<()> {
     let mut runs = Vec::new();
     let mut table = String::new();
     use std::fmt::Write;
-    writeln!(table, "EPI stages on {} (median of {} runs, ms; 1 thread: thread CPU time, more: wall clock)", args.scene, args.iterations)?;
+    let simd = Isa::detect();
+    writeln!(
+        table,
+        "EPI stages on {} (median of {} runs, ms; 1 thread: thread CPU time, more: wall clock; interpolation compiled for {simd:?})",
+        args.scene, args.iterations
+    )?;
     writeln!(
         table,
         "  {:>9} {:>7} {:>3} | {:>7} {:>9} {:>7} {:>7} {:>9} {:>7} {:>8} | {:>9} {:>8} {:>8} | {:>6}",
@@ -140,7 +146,7 @@ pub fn run(args: EpiArgs) -> Result<()> {
     writeln!(table, "  r+i+aa = reach + interpolate + antialias (target: <= 3 ms at 512x512 on one thread)")?;
     writeln!(table, "  reach/px = per-pixel table reachability (the paper's formulation), for comparison with the bit-sliced reach")?;
     writeln!(table, "  B/px = bytes per pixel of the EPI's image-sized structures (--json: the breakdown, and the content-sized ones)")?;
-    crate::emit(args.json, &json!({ "scene": args.scene, "iterations": args.iterations, "runs": runs }), &table);
+    crate::emit(args.json, &json!({ "scene": args.scene, "iterations": args.iterations, "interpolation_simd": format!("{simd:?}"), "runs": runs }), &table);
     Ok(())
 }
 

@@ -56,15 +56,25 @@ pub const fn mask_bit(k: usize) -> u32 {
 /// `64 j + i + dx` of `row`. `dx` in -63..=63.
 #[inline(always)]
 pub fn shifted(row: &[u64], j: usize, dx: i32) -> u64 {
-    let here = row[j];
+    funnel(around(row, j), dx)
+}
+
+/// Word `j` of a bit row and its two neighbours (zeros outside the row).
+#[inline(always)]
+pub fn around(row: &[u64], j: usize) -> [u64; 3] {
+    [if j > 0 { row[j - 1] } else { 0 }, row[j], if j + 1 < row.len() { row[j + 1] } else { 0 }]
+}
+
+/// Bit `i` of the result is bit `i + dx` of the middle word of `[a, b, c]` (from its
+/// neighbours past the ends); `dx` in -63..=63.
+#[inline(always)]
+pub fn funnel([a, b, c]: [u64; 3], dx: i32) -> u64 {
     if dx == 0 {
-        here
+        b
     } else if dx > 0 {
-        let next = if j + 1 < row.len() { row[j + 1] } else { 0 };
-        (here >> dx) | (next << (64 - dx))
+        (b >> dx) | (c << (64 - dx))
     } else {
-        let prev = if j > 0 { row[j - 1] } else { 0 };
-        (here << -dx) | (prev >> (64 + dx))
+        (b << -dx) | (a >> (64 + dx))
     }
 }
 
@@ -238,6 +248,39 @@ impl Reach {
         shifted(self.stored(yy as usize, 24 - k), j, dx)
     }
 
+    /// [`Self::bits`] of every window index `k` (0..25) of word `j` of row `y`, without
+    /// a branch on the offset (the interpolation reads all 25 for each word).
+    #[inline(always)]
+    pub fn window(&self, y: usize, j: usize) -> [u64; 25] {
+        let words = self.words;
+        let mut out = [0u64; 25];
+        out[12] = !0;
+        let here = &self.planes[y * REACH_PLANES * words..][..REACH_PLANES * words];
+        for (l, o) in out[13..].iter_mut().enumerate() {
+            *o = here[l * words + j];
+        }
+        // Before the centre: the reversed offset (window index 24 - k), stored by the pixel
+        // pointed to, in the row two above (k = 0..5), one above (k = 5..10) or this one
+        // (k = 10, 11). Written out offset by offset: shifts by constants, no division by 5.
+        let plane = |dy: usize, k: usize| -> [u64; 3] {
+            let Some(yy) = y.checked_sub(dy) else { return [0; 3] };
+            around(&self.planes[(yy * REACH_PLANES + 24 - k - 13) * words..][..words], j)
+        };
+        out[0] = funnel(plane(2, 0), -2);
+        out[1] = funnel(plane(2, 1), -1);
+        out[2] = funnel(plane(2, 2), 0);
+        out[3] = funnel(plane(2, 3), 1);
+        out[4] = funnel(plane(2, 4), 2);
+        out[5] = funnel(plane(1, 5), -2);
+        out[6] = funnel(plane(1, 6), -1);
+        out[7] = funnel(plane(1, 7), 0);
+        out[8] = funnel(plane(1, 8), 1);
+        out[9] = funnel(plane(1, 9), 2);
+        out[10] = funnel(plane(0, 10), -2);
+        out[11] = funnel(plane(0, 11), -1);
+        out
+    }
+
     /// The 24-bit primary-to-primary mask of pixel (x, y) (bit [`mask_bit`]`(k)` for window
     /// index `k`).
     pub fn mask24(&self, x: usize, y: usize) -> u32 {
@@ -287,7 +330,7 @@ fn reach_row(nb: &Neighbours, flags: &Flags, y: usize, out: &mut [u64]) {
                 }
                 let (a, b, c) = (valid_word(w, j as i64 - 1), valid_word(w, j as i64), valid_word(w, j as i64 + 1));
                 // Both the centre and the pixel it reaches in the image.
-                Window::shift([a, b, c], dx) & b
+                funnel([a, b, c], dx) & b
             })
         } else {
             propagate(&Window::load(nb, y, j))
@@ -318,29 +361,16 @@ impl Window {
         Window(win)
     }
 
-    /// Bit `i` of the result is bit `i + dx` of the middle word (from its neighbours past the
-    /// ends); `dx` in -63..=63.
-    #[inline(always)]
-    fn shift([a, b, c]: [u64; 3], dx: i32) -> u64 {
-        if dx == 0 {
-            b
-        } else if dx > 0 {
-            (b >> dx) | (c << (64 - dx))
-        } else {
-            (b << -dx) | (a >> (64 + dx))
-        }
-    }
-
     /// Masks between each pixel `c + (qx, qy)` and its right neighbour.
     #[inline(always)]
     fn right(&self, qx: i32, qy: usize) -> M4 {
-        M4(std::array::from_fn(|b| Self::shift(self.0[qy][b], qx)))
+        M4(std::array::from_fn(|b| funnel(self.0[qy][b], qx)))
     }
 
     /// Masks between each pixel `c + (qx, qy)` and its down neighbour.
     #[inline(always)]
     fn down(&self, qx: i32, qy: usize) -> M4 {
-        M4(std::array::from_fn(|b| Self::shift(self.0[qy][4 + b], qx)))
+        M4(std::array::from_fn(|b| funnel(self.0[qy][4 + b], qx)))
     }
 }
 
