@@ -75,20 +75,12 @@ fn trace(cam: &CameraFrame, sx: f32, sy: f32, pixel: [u32; 2]) -> Sample {
     }
 }
 
-fn rand01(state: &mut u64) -> f32 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-}
-
 fn main() {
     let args = Args::parse();
     let n = args.size;
     let base = Camera { eye: Vec3::new(3.0, 2.5, 4.0), target: Vec3::new(0.0, 0.4, 0.0), up: Vec3::Y, fov_y_degrees: 45.0 };
     let mut cache = RenderCache::new(CacheConfig { width: n, height: n, points_per_pixel: args.points_per_pixel, background: Vec3::ZERO });
-    let mut rng = 1u64;
+    let mut rng = edgepoint_server::rng::Rng::new(1);
 
     // Fill the whole pool from views around the start (a cache after some interaction).
     let t_fill = Instant::now();
@@ -102,7 +94,7 @@ fn main() {
                 if filled >= cache.capacity() {
                     break;
                 }
-                let s = trace(&cam, x as f32 + rand01(&mut rng), y as f32 + rand01(&mut rng), [x, y]);
+                let s = trace(&cam, x as f32 + rng.unit(), y as f32 + rng.unit(), [x, y]);
                 filled += usize::from(cache.insert(&s));
             }
         }

@@ -228,20 +228,7 @@ pub fn ssim(a: &[Vec3], b: &[Vec3], width: u32, height: u32) -> f64 {
 mod tests {
     use super::*;
 
-    /// Small deterministic generator for test images (splitmix64).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        fn f(&mut self) -> f32 {
-            (self.next() >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
+    use crate::rng::Rng;
 
     #[test]
     fn srgb8_round_trips_and_matches_powf_rounding() {
@@ -251,7 +238,7 @@ mod tests {
         }
         let mut r = Rng(7);
         for _ in 0..200_000 {
-            let x = r.f() * 1.2 - 0.1;
+            let x = r.unit() * 1.2 - 0.1;
             let want = (linear_to_srgb(x) * 255.0).round() as u8;
             let got = linear_to_srgb8(Vec3::splat(x))[0];
             // The two can only disagree on values within float error of a rounding boundary.
@@ -266,7 +253,7 @@ mod tests {
     #[test]
     fn identical_images_are_perfect() {
         let mut r = Rng(1);
-        let img: Vec<Vec3> = (0..64 * 48).map(|_| Vec3::new(r.f(), r.f(), r.f())).collect();
+        let img: Vec<Vec3> = (0..64 * 48).map(|_| Vec3::new(r.unit(), r.unit(), r.unit())).collect();
         assert_eq!(psnr(&img, &img), f64::INFINITY);
         assert!((ssim(&img, &img, 64, 48) - 1.0).abs() < 1e-12);
         assert!((ssim(&img[..5 * 4], &img[..5 * 4], 5, 4) - 1.0).abs() < 1e-12);
@@ -278,11 +265,11 @@ mod tests {
         let mut r = Rng(3);
         for &delta in &[0.01f32, 0.03, 0.1] {
             let n = 100 * 100;
-            let enc: Vec<[f32; 3]> = (0..n).map(|_| [0.2 + 0.6 * r.f(), 0.2 + 0.6 * r.f(), 0.2 + 0.6 * r.f()]).collect();
+            let enc: Vec<[f32; 3]> = (0..n).map(|_| [0.2 + 0.6 * r.unit(), 0.2 + 0.6 * r.unit(), 0.2 + 0.6 * r.unit()]).collect();
             let a: Vec<Vec3> = enc.iter().map(|e| Vec3::from_array(e.map(srgb_to_linear))).collect();
             let b: Vec<Vec3> = enc
                 .iter()
-                .map(|e| Vec3::from_array(e.map(|v| srgb_to_linear(if r.next() & 1 == 0 { v + delta } else { v - delta }))))
+                .map(|e| Vec3::from_array(e.map(|v| srgb_to_linear(if r.next_u64() & 1 == 0 { v + delta } else { v - delta }))))
                 .collect();
             let want = -20.0 * (delta as f64).log10();
             let got = psnr(&a, &b);
@@ -300,8 +287,8 @@ mod tests {
                 Vec3::splat(0.5 + 0.4 * ((x * 0.3).sin() * (y * 0.2).cos()))
             })
             .collect();
-        let small: Vec<Vec3> = a.iter().map(|c| *c * (1.0 + 0.02 * (r.f() - 0.5))).collect();
-        let big: Vec<Vec3> = a.iter().map(|c| (*c * (1.0 + 0.8 * (r.f() - 0.5))).max(Vec3::ZERO)).collect();
+        let small: Vec<Vec3> = a.iter().map(|c| *c * (1.0 + 0.02 * (r.unit() - 0.5))).collect();
+        let big: Vec<Vec3> = a.iter().map(|c| (*c * (1.0 + 0.8 * (r.unit() - 0.5))).max(Vec3::ZERO)).collect();
         let s_small = ssim(&a, &small, w, h);
         let s_big = ssim(&a, &big, w, h);
         assert!(s_small > 0.95 && s_small < 1.0, "small noise ssim {s_small}");

@@ -28,6 +28,7 @@ pub mod image_metrics;
 pub mod metrics;
 pub mod reference;
 pub mod render_cache;
+pub mod rng;
 pub mod sampling;
 pub mod scenes;
 pub mod service;

@@ -13,10 +13,13 @@ pub struct SharedScene {
     pub edge_index: EdgeIndexSlot,
 }
 
+/// A weak [`EdgeIndexSlot`].
+type WeakEdgeIndexSlot = Weak<std::sync::OnceLock<Arc<crate::edges::finder::SceneEdgeIndex>>>;
+
 /// Content hash → the scene and edge index sessions hold (weakly: alive while used).
 #[derive(Default)]
 pub struct SceneLibrary {
-    entries: Mutex<HashMap<String, (Weak<Scene>, Weak<std::sync::OnceLock<Arc<crate::edges::finder::SceneEdgeIndex>>>)>>,
+    entries: Mutex<HashMap<String, (Weak<Scene>, WeakEdgeIndexSlot)>>,
 }
 
 impl SceneLibrary {

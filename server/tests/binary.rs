@@ -67,12 +67,9 @@ async fn serves_sessions_and_health_and_exits_on_sigterm() {
     let pid = child.id().to_string();
     assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
     // The session stream ends and the process exits cleanly.
-    loop {
-        match tokio::time::timeout(Duration::from_secs(10), v.rx.message()).await.expect("stream ends after SIGTERM") {
-            Ok(Some(_)) => continue,
-            Ok(None) | Err(_) => break,
-        }
-    }
+    while let Ok(Some(_)) =
+        tokio::time::timeout(Duration::from_secs(10), v.rx.message()).await.expect("stream ends after SIGTERM")
+    {}
     let status = tokio::task::spawn_blocking(move || child.wait().unwrap()).await.unwrap();
     assert!(status.success(), "exit status {status:?}");
     assert!(t0.elapsed() < Duration::from_secs(8), "graceful exit took {:?}", t0.elapsed());

@@ -199,12 +199,9 @@ async fn session_limit_and_missing_workers_are_refused() {
 
     // Shutdown ends running sessions and refuses new ones.
     handle.shutdown();
-    loop {
-        match tokio::time::timeout(std::time::Duration::from_secs(5), again.rx.message()).await.expect("stream ends") {
-            Ok(Some(_)) => continue,
-            Ok(None) | Err(_) => break,
-        }
-    }
+    while let Ok(Some(_)) =
+        tokio::time::timeout(std::time::Duration::from_secs(5), again.rx.message()).await.expect("stream ends")
+    {}
     let e = open(&addr, start_msg(cornell(), 32, 24)).await.err().unwrap();
     assert_eq!(e.code(), tonic::Code::Unavailable);
 }

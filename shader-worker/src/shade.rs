@@ -46,7 +46,7 @@ impl ShaderSpec {
                 for (k, &v) in params {
                     match k.as_str() {
                         "shadow_rays" => {
-                            if !(v.is_finite() && v >= 1.0 && v <= 4096.0 && v.fract() == 0.0) {
+                            if !(v.is_finite() && (1.0..=4096.0).contains(&v) && v.fract() == 0.0) {
                                 return Err(format!("shader direct: shadow_rays must be a whole number in 1..=4096, got {v}"));
                             }
                             p.shadow_rays = v as u32;

@@ -63,13 +63,13 @@ async fn bad_input_gets_clear_errors_and_other_sessions_go_on() {
     let ply = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 oops\n".to_vec();
     let mut bad = start_builtin("cornell", 64, 48);
     bad.scene = Some(edgepoint_proto::files_source(vec![("broken.ply".into(), ply)]));
-    let err = SessionClient::connect(&url, bad).await.err().expect("malformed scene is refused");
+    let err = SessionClient::connect(&url, bad).await.expect_err("malformed scene is refused");
     assert_eq!(err.code(), Some(tonic::Code::InvalidArgument), "{err}");
     let msg = err.to_string();
     assert!(msg.contains("broken.ply") && msg.contains("11"), "message names the file and line: {msg}");
 
     // Zero image size.
-    let err = SessionClient::connect(&url, start_builtin("cornell", 0, 48)).await.err().expect("zero width is refused");
+    let err = SessionClient::connect(&url, start_builtin("cornell", 0, 48)).await.expect_err("zero width is refused");
     assert_eq!(err.code(), Some(tonic::Code::InvalidArgument), "{err}");
     assert!(err.to_string().contains("width"), "{err}");
 

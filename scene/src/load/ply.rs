@@ -92,8 +92,8 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
             if e.name == "vertex" {
                 for (k, p) in e.props.iter().enumerate() {
                     match p {
-                        Property::Scalar(_, t) => values[k] = r.scalar(*t).map_err(|m| at(m))?,
-                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(|m| at(m))?,
+                        Property::Scalar(_, t) => values[k] = r.scalar(*t).map_err(&at)?,
+                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(&at)?,
                     }
                 }
                 let v = Vec3::new(values[xyz[0]] as f32, values[xyz[1]] as f32, values[xyz[2]] as f32);
@@ -105,13 +105,13 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                 for p in &e.props {
                     match p {
                         Property::List(n, c, t) if n == "vertex_indices" || n == "vertex_index" => {
-                            let count = r.scalar(*c).map_err(|m| at(m))?;
-                            if !(count >= 0.0 && count <= 1_000_000.0) {
+                            let count = r.scalar(*c).map_err(&at)?;
+                            if !(0.0..=1_000_000.0).contains(&count) {
                                 return Err(at(format!("face has an invalid vertex count {count}")));
                             }
                             poly.clear();
                             for _ in 0..count as usize {
-                                let idx = r.scalar(*t).map_err(|m| at(m))?;
+                                let idx = r.scalar(*t).map_err(&at)?;
                                 if !(idx >= 0.0 && idx < positions.len().max(vertex.count) as f64 && idx.fract() == 0.0) {
                                     return Err(at(format!(
                                         "face refers to vertex {idx} but there are {} vertices",
@@ -128,22 +128,22 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                             }
                         }
                         Property::Scalar(_, t) => {
-                            r.scalar(*t).map_err(|m| at(m))?;
+                            r.scalar(*t).map_err(&at)?;
                         }
-                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(|m| at(m))?,
+                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(&at)?,
                     }
                 }
             } else {
                 for p in &e.props {
                     match p {
                         Property::Scalar(_, t) => {
-                            r.scalar(*t).map_err(|m| at(m))?;
+                            r.scalar(*t).map_err(&at)?;
                         }
-                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(|m| at(m))?,
+                        Property::List(_, c, t) => r.skip_list(*c, *t).map_err(&at)?,
                     }
                 }
             }
-            r.end_record().map_err(|m| at(m))?;
+            r.end_record().map_err(at)?;
             if i % 65536 == 65535 {
                 progress.advance(65536);
             }
@@ -157,8 +157,11 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
     Ok((positions, triangles))
 }
 
-/// Parses the header; returns the format, elements, the body bytes and the header's line count.
-fn header<'a>(name: &str, data: &'a [u8]) -> Result<(Format, Vec<Element>, &'a [u8], usize), SceneError> {
+/// A parsed header: the format, the elements, the body bytes and the header's line count.
+type Header<'a> = (Format, Vec<Element>, &'a [u8], usize);
+
+/// Parses the header.
+fn header<'a>(name: &str, data: &'a [u8]) -> Result<Header<'a>, SceneError> {
     if !data.starts_with(b"ply") {
         return Err(SceneError::line(name, 1, "not a PLY file (it does not start with `ply`)"));
     }
@@ -268,7 +271,7 @@ impl Reader<'_> {
 
     fn skip_list(&mut self, c: Scalar, t: Scalar) -> Result<(), String> {
         let n = self.scalar(c)?;
-        if !(n >= 0.0 && n <= 1e7) {
+        if !(0.0..=1e7).contains(&n) {
             return Err(format!("invalid list length {n}"));
         }
         for _ in 0..n as usize {

@@ -145,7 +145,7 @@ mod tests {
             pi.point.push(if has { i as u32 } else { crate::render_cache::NO_POINT });
             // Some points are misses (at infinity).
             let miss = rng.chance(0.05);
-            pi.depth.push(if !has || miss { f32::INFINITY } else { 1.0 + 9.0 * rng.f32() });
+            pi.depth.push(if !has || miss { f32::INFINITY } else { 1.0 + 9.0 * rng.unit() });
             pi.subpixel.push([0.5, 0.5]);
             pi.color.push(Vec3::ZERO);
             pi.age.push(0.0);

@@ -15,7 +15,7 @@ fn ray_cast_points(loaded: &LoadedScene, cam: &CameraFrame, density: f64, seed: 
     let mut pi = PointImage { width: w as u32, height: h as u32, ..Default::default() };
     for y in 0..h {
         for x in 0..w {
-            let (u, v) = (rng.f32(), rng.f32());
+            let (u, v) = (rng.unit(), rng.unit());
             let has = rng.chance(density);
             let (o, d) = cam.ray(x as f32 + u, y as f32 + v);
             let depth = match inst.closest_hit(&loaded.bvh, o, d, 0.0, f32::INFINITY) {

@@ -1,36 +1,7 @@
 //! Deterministic randomness for the EPI tests.
 #![cfg(test)]
 
-/// splitmix64.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn f64(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    pub fn f32(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in 0..n.
-    pub fn below(&mut self, n: u32) -> u32 {
-        (((self.next() >> 32) * n as u64) >> 32) as u32
-    }
-
-    pub fn chance(&mut self, p: f64) -> bool {
-        self.f64() < p
-    }
-}
+pub use crate::rng::Rng;
 
 use super::Epi;
 use crate::render_cache::{PointImage, NO_POINT};
@@ -89,9 +60,9 @@ pub fn random_points(w: usize, h: usize, density: f64, rng: &mut Rng) -> PointIm
     for i in 0..w * h {
         let has = rng.chance(density);
         pi.point.push(if has { i as u32 } else { NO_POINT });
-        pi.depth.push(if has { 1.0 + rng.f32() } else { f32::INFINITY });
-        pi.subpixel.push([rng.f32(), rng.f32()]);
-        pi.color.push(if has { Vec3::new(rng.f32(), rng.f32(), rng.f32()) } else { Vec3::ZERO });
+        pi.depth.push(if has { 1.0 + rng.unit() } else { f32::INFINITY });
+        pi.subpixel.push([rng.unit(), rng.unit()]);
+        pi.color.push(if has { Vec3::new(rng.unit(), rng.unit(), rng.unit()) } else { Vec3::ZERO });
         pi.age.push(if has { 1.0 } else { f32::INFINITY });
     }
     pi

@@ -5,29 +5,7 @@ use super::*;
 use crate::stage_times::StageTimes;
 use edgepoint_scene::camera::{Camera, CameraFrame};
 
-/// splitmix64, deterministic test randomness.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn f(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f()
-    }
-    fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-    }
-    fn color(&mut self) -> Vec3 {
-        self.vec(0.0, 1.0)
-    }
-}
+use crate::rng::Rng;
 
 fn hit(position: Vec3, color: Vec3, object: u32) -> Sample {
     Sample { hit: true, position, normal: Vec3::Y, color, object, epoch: 1, pixel: [0, 0] }
@@ -69,11 +47,11 @@ fn oracle_project(cam: &CameraFrame, p: &CachedPoint) -> Option<(usize, f32)> {
 fn projector_agrees_with_the_camera() {
     let mut rng = Rng(41);
     for _ in 0..20 {
-        let (w, h) = (16 + (rng.next() % 1000) as u32, 16 + (rng.next() % 800) as u32);
-        let cam = camera(rng.vec(-20.0, 20.0), rng.vec(-1.0, 1.0), w, h);
+        let (w, h) = (16 + (rng.next_u64() % 1000) as u32, 16 + (rng.next_u64() % 800) as u32);
+        let cam = camera(rng.vec3(-20.0, 20.0), rng.vec3(-1.0, 1.0), w, h);
         let prj = Projector::new(&cam);
         for _ in 0..500 {
-            let p = cam.eye + rng.vec(-30.0, 30.0);
+            let p = cam.eye + rng.vec3(-30.0, 30.0);
             match (prj.project(p, true), cam.project(p)) {
                 (Some((sx, sy, z)), Some((cx, cy, cz))) => {
                     assert_eq!(z, cz, "depth is computed the same way");
@@ -102,22 +80,22 @@ fn reprojection_and_culling_match_brute_force() {
     let mut rng = Rng(11);
     let (mut total_culled, mut total_kept) = (0, 0);
     for case in 0..12 {
-        let (w, h) = (8 + (rng.next() % 40) as u32, 8 + (rng.next() % 30) as u32);
-        let mut c = cache(w, h, 1.0 + rng.f() * 3.0);
-        let eye = rng.vec(-4.0, 4.0) + Vec3::new(0.0, 0.0, 6.0);
-        let cam = camera(eye, rng.vec(-0.5, 0.5), w, h);
+        let (w, h) = (8 + (rng.next_u64() % 40) as u32, 8 + (rng.next_u64() % 30) as u32);
+        let mut c = cache(w, h, 1.0 + rng.unit() * 3.0);
+        let eye = rng.vec3(-4.0, 4.0) + Vec3::new(0.0, 0.0, 6.0);
+        let cam = camera(eye, rng.vec3(-0.5, 0.5), w, h);
         let n = c.capacity() + c.capacity() / 3; // overfill: replacement runs too
         for _ in 0..n {
-            let s = match rng.next() % 10 {
-                0 => miss(rng.vec(-1.0, 1.0), rng.color()),
+            let s = match rng.next_u64() % 10 {
+                0 => miss(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0)),
                 // Several points on few depths make exact depth ties (index decides).
-                1 => hit(Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), 0.0), rng.color(), 1),
-                _ => hit(rng.vec(-2.0, 2.0), rng.color(), 2),
+                1 => hit(Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), 0.0), rng.vec3(0.0, 1.0), 1),
+                _ => hit(rng.vec3(-2.0, 2.0), rng.vec3(0.0, 1.0), 2),
             };
             // The pixel it was "shaded for": where it projects, else anywhere.
             let (x, y) = match cam.project(s.position) {
                 Some((sx, sy, _)) if s.hit && sx >= 0.0 && sy >= 0.0 => (sx as u32, sy as u32),
-                _ => ((rng.next() % w as u64) as u32, (rng.next() % h as u64) as u32),
+                _ => ((rng.next_u64() % w as u64) as u32, (rng.next_u64() % h as u64) as u32),
             };
             assert!(c.insert(&at(s, x.min(w - 1), y.min(h - 1))));
         }
@@ -255,7 +233,7 @@ fn one_sample_per_pixel(c: &mut RenderCache, cam: &CameraFrame, rng: &mut Rng) -
                     obj = 1;
                 }
             }
-            let col = rng.color();
+            let col = rng.vec3(0.0, 1.0);
             colors.push(col);
             let mut s = if obj == u32::MAX { miss(d, col) } else { hit(o + d * t_hit, col, obj) };
             s.pixel = [x, y];
@@ -307,7 +285,7 @@ fn occluded_point_in_a_gap_is_culled_and_filled() {
     let mut colors = vec![Vec3::ZERO; near.len()];
     for (i, p) in near.iter().enumerate() {
         if i != gap {
-            colors[i] = rng.color();
+            colors[i] = rng.vec3(0.0, 1.0);
             c.insert(&at(hit(*p, colors[i], 0), i as u32 % w, i as u32 / w));
         }
     }
@@ -395,10 +373,10 @@ fn points_on_a_slanted_plane_are_kept() {
         let mut c = cache(w, h, 1.0);
         for y in 0..h {
             for x in 0..w {
-                let (o, d) = cam.ray(x as f32 + rng.f(), y as f32 + rng.f());
+                let (o, d) = cam.ray(x as f32 + rng.unit(), y as f32 + rng.unit());
                 let t = -n.dot(o) / n.dot(d);
                 if t > 0.0 {
-                    c.insert(&at(hit(o + d * t, rng.color(), 0), x, y));
+                    c.insert(&at(hit(o + d * t, rng.vec3(0.0, 1.0), 0), x, y));
                 }
             }
         }
@@ -505,17 +483,17 @@ fn invalidate_objects_removes_exactly_those_points() {
     let mut rng = Rng(3);
     for _ in 0..5 {
         let mut c = cache(16, 16, 2.0);
-        let n = (rng.next() % 600) as usize;
+        let n = (rng.next_u64() % 600) as usize;
         for _ in 0..n {
-            let obj = (rng.next() % 10) as u32;
+            let obj = (rng.next_u64() % 10) as u32;
             if obj == 9 {
-                c.insert(&at(miss(rng.vec(-1.0, 1.0), rng.color()), 0, (rng.next() % 16) as u32));
+                c.insert(&at(miss(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0)), 0, (rng.next_u64() % 16) as u32));
             } else {
-                c.insert(&at(hit(rng.vec(-1.0, 1.0), rng.color(), obj), 0, (rng.next() % 16) as u32));
+                c.insert(&at(hit(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0), obj), 0, (rng.next_u64() % 16) as u32));
             }
         }
         let before: Vec<Option<CachedPoint>> = (0..c.capacity() as u32).map(|i| c.point(i)).collect();
-        let drop: Vec<u32> = (0..10).filter(|_| rng.next().is_multiple_of(3)).collect();
+        let drop: Vec<u32> = (0..10).filter(|_| rng.next_u64().is_multiple_of(3)).collect();
         c.invalidate_objects(&drop);
         let mut kept = 0;
         for (i, b) in before.iter().enumerate() {
@@ -598,9 +576,9 @@ fn samples_stay_in_the_pool_region_of_their_row_band() {
     assert_eq!(c.regions[3].end - c.regions[3].start, 90);
     // Over-fill: every insert lands in its band's region, the other regions keep their points.
     for k in 0..2000u32 {
-        let y = (rng.next() % (h as u64 + 5)) as u32; // rows past the end count as the last
+        let y = (rng.next_u64() % (h as u64 + 5)) as u32; // rows past the end count as the last
         let tag = 10_000 + k;
-        assert!(c.insert(&at(hit(rng.vec(-1.0, 1.0), rng.color(), tag), 3, y)));
+        assert!(c.insert(&at(hit(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0), tag), 3, y)));
         let slot = (0..c.capacity() as u32).find(|&i| c.point(i).map(|p| p.object) == Some(tag)).unwrap();
         let band = (y / BAND_ROWS).min(3) as usize;
         let r = &c.regions[band];
@@ -617,8 +595,8 @@ fn results_do_not_depend_on_the_thread_count() {
     let cam = camera(Vec3::new(1.0, 2.0, 6.0), Vec3::ZERO, w, h);
     let samples: Vec<Sample> = (0..3000)
         .map(|_| {
-            let s = if rng.next().is_multiple_of(8) { miss(rng.vec(-1.0, 1.0), rng.color()) } else { hit(rng.vec(-2.0, 2.0), rng.color(), 0) };
-            at(s, (rng.next() % w as u64) as u32, (rng.next() % h as u64) as u32)
+            let s = if rng.next_u64().is_multiple_of(8) { miss(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0)) } else { hit(rng.vec3(-2.0, 2.0), rng.vec3(0.0, 1.0), 0) };
+            at(s, (rng.next_u64() % w as u64) as u32, (rng.next_u64() % h as u64) as u32)
         })
         .collect();
     let run = |threads: usize| {

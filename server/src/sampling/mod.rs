@@ -82,14 +82,7 @@ pub struct Sampler {
     err_next: Vec<f32>,
 }
 
-/// splitmix64 finaliser: a good 64-bit hash of a counter.
-#[inline]
-pub(crate) fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
+pub(crate) use crate::rng::mix64;
 
 /// Uniform in [0, 1) from the top 24 bits.
 #[inline]

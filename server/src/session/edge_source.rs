@@ -131,6 +131,9 @@ impl SessionEdges {
 /// The triples a session has seen (its feedback map), without copying them every frame.
 pub trait TripleSet {
     fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
     fn keys(&self) -> Vec<TripleKey>;
 }
 

@@ -123,14 +123,8 @@ pub fn build_batches(
     }
 }
 
-/// SplitMix64: a tiny, well-mixed generator step for batch seeds.
-#[inline]
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
+/// A tiny, well-mixed generator step for batch seeds.
+pub use crate::rng::mix64 as splitmix64;
 
 #[cfg(test)]
 mod tests {

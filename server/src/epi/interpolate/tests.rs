@@ -133,7 +133,7 @@ fn every_path_and_instruction_set_equals_a_per_pixel_loop_bit_for_bit() {
             // A few failed shades: shown by their own pixel, black to their neighbours.
             for c in points.color.iter_mut() {
                 if rng.chance(0.01) {
-                    *c = [Vec3::new(f32::NAN, 0.5, 0.5), Vec3::new(0.2, f32::INFINITY, 0.1)][rng.below(2) as usize];
+                    *c = [Vec3::new(f32::NAN, 0.5, 0.5), Vec3::new(0.2, f32::INFINITY, 0.1)][rng.below(2)];
                 }
             }
             let background = Vec3::new(0.1, 0.2, 0.3);

@@ -113,7 +113,7 @@ fn expected(cam: &CameraFrame, w: usize, h: usize, edges: &[EdgeSegment], depth:
 fn random_edges(rng: &mut Rng, n: usize) -> Vec<EdgeSegment> {
     (0..n)
         .map(|_| {
-            let p = |rng: &mut Rng| Vec3::new(rng.f32() * 8.0 - 4.0, rng.f32() * 8.0 - 4.0, rng.f32() * -9.0 + 1.5);
+            let p = |rng: &mut Rng| Vec3::new(rng.unit() * 8.0 - 4.0, rng.unit() * 8.0 - 4.0, rng.unit() * -9.0 + 1.5);
             let a = p(rng);
             // Mostly short segments, some long ones, some crossing the eye plane.
             let b = if rng.chance(0.7) { a + (p(rng) - Vec3::new(0.0, 0.0, -3.0)) * 0.1 } else { p(rng) };
@@ -129,7 +129,7 @@ fn crossings_and_culling_match_plane_intersections_in_3d() {
         let cam = camera(w, h);
         let mut depth = ConservativeDepth::new(w, h);
         for d in depth.depth.iter_mut() {
-            *d = if rng.chance(0.3) { f32::INFINITY } else { 1.0 + 8.0 * rng.f32() };
+            *d = if rng.chance(0.3) { f32::INFINITY } else { 1.0 + 8.0 * rng.unit() };
         }
         let edges = random_edges(&mut rng, 300);
         let mut out = Boundaries::new(w, h);

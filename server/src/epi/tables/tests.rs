@@ -158,13 +158,13 @@ fn random_cell(cell: Cell, shared: u32, through: Option<u32>, rng: &mut Rng) -> 
     match through {
         None if rng.chance(0.3) => RandomCell { code: crate::epi::code::EMPTY, primary_b: false },
         None => loop {
-            let (a, b) = (rng.below(4 * s), rng.below(4 * s));
+            let (a, b) = (rng.below(4 * s as usize) as u32, rng.below(4 * s as usize) as u32);
             if a / s != b / s && a / s != shared && b / s != shared {
                 return RandomCell { code: cell.encode(a, b), primary_b: rng.chance(0.5) };
             }
         },
         Some(pos) => loop {
-            let b = rng.below(4 * s);
+            let b = rng.below(4 * s as usize) as u32;
             if b / s != shared {
                 return RandomCell { code: cell.encode(shared * s + pos, b), primary_b: rng.chance(0.5) };
             }
@@ -193,7 +193,7 @@ fn neighbour_tables_match_regions_meeting_along_the_shared_side_of_random_edges(
             for _ in 0..3000 {
                 // Neighbours share the crossings of their shared side: both cross it at the
                 // same segment, or neither does.
-                let through = rng.chance(0.5).then(|| rng.below(cell.segments));
+                let through = rng.chance(0.5).then(|| rng.below(cell.segments as usize) as u32);
                 let (a, b) = (random_cell(cell, sa, through, &mut rng), random_cell(cell, sb, through, &mut rng));
                 // The shared crossing as the true edges would have it: anywhere in the segment.
                 let mut oracle = 0u8;
