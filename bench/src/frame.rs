@@ -193,6 +193,10 @@ pub fn run(args: FrameArgs) -> Result<()> {
         let mut first_at: Option<Instant> = None;
         let mut dropped = 0u64;
         let mut first_tree_frame: Option<u64> = None;
+        // The same per-stage times, only of frames whose edges came from the edge trees (the
+        // steady state; before them the brute-force finder runs while the trees build).
+        let mut tree_stage_ms: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        let mut tree_totals = Vec::new();
         while (totals.len() as u32) < args.frames {
             let ev = tokio::time::timeout(Duration::from_secs(60), client.next_event())
                 .await
@@ -212,8 +216,12 @@ pub fn run(args: FrameArgs) -> Result<()> {
                     totals.push(f.total_ms);
                     samples.push(f.samples_used as f64);
                     dropped = f.frames_dropped;
-                    if first_tree_frame.is_none() && f.edges.as_ref().is_some_and(|e| e.edge_trees) {
-                        first_tree_frame = Some(f.sequence);
+                    if f.edges.as_ref().is_some_and(|e| e.edge_trees) {
+                        first_tree_frame.get_or_insert(f.sequence);
+                        for s in &f.stages {
+                            tree_stage_ms.entry(s.stage.clone()).or_default().push(s.ms);
+                        }
+                        tree_totals.push(f.total_ms);
                     }
                     last = Some(f);
                 }
@@ -261,6 +269,9 @@ pub fn run(args: FrameArgs) -> Result<()> {
             })),
             // The first frame found with the edge trees (before it: brute force while they build).
             "first_frame_with_edge_trees": first_tree_frame,
+            "frames_with_edge_trees": tree_totals.len(),
+            "stages_median_ms_with_edge_trees": stage_order.iter().filter_map(|s| tree_stage_ms.get(s).map(|v| (s.clone(), json!(median(v))))).collect::<serde_json::Map<_, _>>(),
+            "total_median_ms_with_edge_trees": if tree_totals.is_empty() { json!(null) } else { json!(median(&tree_totals)) },
         });
         if let Some(dir) = &args.out {
             std::fs::create_dir_all(dir)?;
@@ -293,6 +304,14 @@ pub fn run(args: FrameArgs) -> Result<()> {
         }
         writeln!(table, "  {:<14} {:>8.2} ms (median) -> pipeline {:.1} fps", "total", median_total, out["pipeline_fps"].as_f64().unwrap_or(0.0))?;
         writeln!(table, "  delivered fps  {fps:.1}; samples/frame {mean_samples:.0}; sparseness ratio {:.1}", out["sparseness_ratio"].as_f64().unwrap_or(0.0))?;
+        if let (Some(first), Some(t)) = (first_tree_frame, out["total_median_ms_with_edge_trees"].as_f64()) {
+            writeln!(
+                table,
+                "  edge trees from frame {first}; {} frames with them: edges {:.2} ms, total {t:.2} ms (medians)",
+                tree_totals.len(),
+                tree_stage_ms.get("edges").map_or(0.0, |v| median(v)),
+            )?;
+        }
         if let (Some(p), Some(e)) = (&last.pixels, &last.edges) {
             writeln!(
                 table,

@@ -28,11 +28,11 @@ pub struct QualityArgs {
     #[arg(long)]
     pub scene: Vec<String>,
     /// The four scenes of the issue: cornell-point (hard shadows), cornell (soft shadows), and
-    /// the bunny and the dragon from --data on a floor under a point light.
+    /// the bunny and the dragon from --data-dir on a floor under a point light.
     #[arg(long)]
     pub all: bool,
     /// Directory of the shared models (bunny/bun_zipper.ply, dragon/dragon_vrip.ply).
-    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))]
+    #[arg(long = "data-dir", visible_alias = "data", default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))]
     pub data: PathBuf,
     #[arg(long, default_value_t = 512)]
     pub width: u32,
