@@ -128,5 +128,5 @@ fn a_cornell_frame_has_mostly_empty_pixels_and_times_every_stage() {
     assert_eq!(names, [STAGE_RASTERIZE, STAGE_REACH, STAGE_INTERPOLATE, STAGE_SPREAD, STAGE_ANTIALIAS, STAGE_COMPLEX]);
     // Per-pixel structures stay within the paper's budget for this frame.
     let per_pixel: usize = epi.memory().iter().chain(&epi.memory_content()).map(|m| m.1).sum();
-    assert!((per_pixel as f64) / (n as f64) < 16.0, "{:?}", epi.memory());
+    assert!((per_pixel as f64) / (n as f64) < 16.0, "{} B/px: {:?} {:?}", per_pixel as f64 / n as f64, epi.memory(), epi.memory_content());
 }

@@ -74,6 +74,10 @@ struct Mock {
     seen: Arc<Mutex<Seen>>,
     /// Frames per session before the mock ends the stream normally (0 = unlimited).
     frame_limit: u64,
+    /// Send each frame after the first only once a viewer message has arrived since the
+    /// previous one (or 2 s have passed): a scripted viewer's messages then all reach the
+    /// mock before the run ends, however loaded the machine.
+    paced: bool,
 }
 
 #[tonic::async_trait]
@@ -97,6 +101,8 @@ impl Renderer for Mock {
         self.seen.lock().unwrap().starts.push(start.clone());
         let (tx, rx) = mpsc::channel(2);
         let limit = self.frame_limit;
+        let (paced, arrived) = (self.paced, Arc::new(tokio::sync::Notify::new()));
+        let arrived_in = arrived.clone();
         let frames_tx = tx.clone();
         tokio::spawn(async move {
             let started = pb::ServerMsg { msg: Some(server_msg::Msg::Started(mock_started())) };
@@ -105,6 +111,9 @@ impl Renderer for Mock {
             }
             let mut seq = 0u64;
             while limit == 0 || seq < limit {
+                if paced && seq > 0 {
+                    let _ = tokio::time::timeout(Duration::from_secs(2), arrived.notified()).await;
+                }
                 seq += 1;
                 let img = expected_image(seq, start.width, start.height);
                 let encoding = if start.encoding == 0 { FrameEncoding::Qoi as i32 } else { start.encoding };
@@ -147,6 +156,7 @@ impl Renderer for Mock {
                     }
                 }
                 seen.lock().unwrap().messages.push(msg);
+                arrived_in.notify_one();
             }
         });
         Ok(Response::new(ReceiverStream::new(rx)))
@@ -162,11 +172,21 @@ pub struct MockServer {
 
 impl MockServer {
     pub fn start(frame_limit: u64) -> MockServer {
+        Self::start_with(frame_limit, false)
+    }
+
+    /// A mock that sends each frame after the first only once the viewer has sent
+    /// something since the previous one (see `Mock::paced`).
+    pub fn start_paced(frame_limit: u64) -> MockServer {
+        Self::start_with(frame_limit, true)
+    }
+
+    fn start_with(frame_limit: u64, paced: bool) -> MockServer {
         let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build().unwrap();
         let seen = Arc::new(Mutex::new(Seen::default()));
         let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
         let addr = listener.local_addr().unwrap();
-        let svc = RendererServer::new(Mock { seen: seen.clone(), frame_limit });
+        let svc = RendererServer::new(Mock { seen: seen.clone(), frame_limit, paced });
         rt.spawn(async move {
             tonic::transport::Server::builder()
                 .add_service(svc)
