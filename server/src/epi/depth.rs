@@ -314,17 +314,11 @@ mod tests {
         pi
     }
 
-    /// An empty window's value: the points of the 3 × 3 blocks of 4 × 4 pixels around the
-    /// block of the vertex, pixel by pixel.
-    fn surroundings_brute_force(pi: &PointImage, w: usize, h: usize, x: i64, y: i64) -> f32 {
-        let b = BLOCK as i64;
-        let (bx, by) = (x / b, y / b);
+    /// Maximum depth, points and pixels of the image inside `[x0, x1) × [y0, y1)`.
+    fn window(pi: &PointImage, w: usize, h: usize, (x0, x1): (i64, i64), (y0, y1): (i64, i64)) -> (f32, usize, usize) {
         let (mut m, mut n, mut cells) = (f32::NEG_INFINITY, 0, 0);
-        for yy in (by - 1) * b..(by + 2) * b {
-            for xx in (bx - 1) * b..(bx + 2) * b {
-                if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                    continue;
-                }
+        for yy in y0.max(0)..y1.min(h as i64) {
+            for xx in x0.max(0)..x1.min(w as i64) {
                 cells += 1;
                 let i = yy as usize * w + xx as usize;
                 if pi.point[i] != crate::render_cache::NO_POINT {
@@ -333,11 +327,12 @@ mod tests {
                 }
             }
         }
-        if n == 0 {
-            f32::INFINITY
-        } else {
-            m * (1.0 + DEPTH_SLACK + SPARSE_SLACK * (1.0 - n as f32 / cells as f32))
-        }
+        (m, n, cells)
+    }
+
+    /// The conservative value of a window with `n` points among `cells` pixels, max `m`.
+    fn slackened(m: f32, n: usize, cells: usize) -> f32 {
+        m * (1.0 + DEPTH_SLACK + SPARSE_SLACK * (1.0 - n as f32 / cells as f32))
     }
 
     #[test]
@@ -349,24 +344,19 @@ mod tests {
             cd.compute(&pi);
             for y in 0..h as i64 {
                 for x in 0..w as i64 {
-                    let (mut m, mut n, mut cells) = (f32::NEG_INFINITY, 0, 0);
-                    for yy in y - 2..=y + 1 {
-                        for xx in x - 2..=x + 1 {
-                            if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                                continue;
-                            }
-                            cells += 1;
-                            let i = yy as usize * w + xx as usize;
-                            if pi.point[i] != crate::render_cache::NO_POINT {
-                                n += 1;
-                                m = m.max(pi.depth[i]);
-                            }
-                        }
-                    }
-                    let want = if n == 0 {
-                        surroundings_brute_force(&pi, w, h, x, y)
+                    let (m, n, cells) = window(&pi, w, h, (x - 2, x + 2), (y - 2, y + 2));
+                    let want = if n > 0 {
+                        slackened(m, n, cells)
                     } else {
-                        m * (1.0 + DEPTH_SLACK + SPARSE_SLACK * (1.0 - n as f32 / cells as f32))
+                        // The 3 × 3 blocks of 4 × 4 pixels around the vertex's block.
+                        let (bx, by) = (x / BLOCK as i64 * BLOCK as i64, y / BLOCK as i64 * BLOCK as i64);
+                        let b = BLOCK as i64;
+                        let (m, n, cells) = window(&pi, w, h, (bx - b, bx + 2 * b), (by - b, by + 2 * b));
+                        if n == 0 {
+                            f32::INFINITY
+                        } else {
+                            slackened(m, n, cells)
+                        }
                     };
                     let got = cd.at(x, y);
                     assert!(got == want || (got - want).abs() <= 1e-5 * want, "({x},{y}) of {w}x{h}: {got} vs {want}");
