@@ -4,7 +4,7 @@
 //! - `--mesh PATH`: edge-tree build time; silhouette time from random viewpoints against
 //!   brute force (every edge tested, [`brute::mesh_silhouettes`]) from the same viewpoints,
 //!   with the tree queried on all threads and on one; the tree's shape and how much of it
-//!   a query visits.
+//!   a query visits, with both node bounds and with the paper's interval test alone.
 //! - `--scene NAME|PATH`: the whole edge finder on a scene: build times, shadow edges at
 //!   load (every triple a session's shader would report: shadow rays from random surface
 //!   points), then frames from the scene camera: silhouette/sharp/boundary time against
@@ -152,6 +152,7 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
     let eyes = viewpoints(mesh, a.views, a.seed);
     let (mut brute_ms, mut tree_ms, mut tree1_ms, mut counts, mut visited, mut tested) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut visited_interval, mut tested_interval) = (Vec::new(), Vec::new());
     let (mut want, mut got) = (Vec::with_capacity(1 << 16), Vec::with_capacity(1 << 16));
     let mut mismatches = 0;
     for eye in &eyes {
@@ -177,9 +178,9 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         let e = Vec3A::from(*eye);
         let (mut nodes, mut lanes) = (0usize, 0usize);
         tree.traverse(
-            |n| {
+            |n, d| {
                 nodes += 1;
-                if n.facing(e, e).sign_is_fixed() {
+                if n.facing_tight(d, e, e).sign_is_fixed() {
                     Visit::Skip
                 } else {
                     Visit::Test
@@ -189,6 +190,21 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         );
         visited.push(nodes as f64);
         tested.push(lanes as f64);
+        // The same with the paper's interval test alone (what the spread bound saves).
+        let (mut nodes, mut lanes) = (0usize, 0usize);
+        tree.traverse(
+            |n, _| {
+                nodes += 1;
+                if n.facing(e, e).sign_is_fixed() {
+                    Visit::Skip
+                } else {
+                    Visit::Test
+                }
+            },
+            |b, _| lanes += b.len() * 4,
+        );
+        visited_interval.push(nodes as f64);
+        tested_interval.push(lanes as f64);
     }
     let (bm, tm, t1) = (median(&brute_ms), median(&tree_ms), median(&tree1_ms));
     let out = json!({
@@ -210,6 +226,8 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         "silhouettes_median": median(&counts),
         "nodes_visited_median": median(&visited),
         "edge_lanes_tested_median": median(&tested),
+        "nodes_visited_interval_test_only_median": median(&visited_interval),
+        "edge_lanes_tested_interval_test_only_median": median(&tested_interval),
         "mismatches": mismatches,
         "threads": rayon::current_num_threads(),
     });

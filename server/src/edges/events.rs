@@ -18,7 +18,8 @@
 //!   directions `n0 × (b - a)` and `n1 × (a - b)` of the two faces, measured against the
 //!   plane normal (for a silhouette both faces leave on one side). The tree is traversed
 //!   once for the whole light: internal nodes evaluate Equation 1 with the interval of the
-//!   light's bounding box as the eye, and subtrees entirely behind the (one-sided) light's
+//!   light's bounding box as the eye (both node bounds, [`super::tree::Node::facing_tight`]),
+//!   and subtrees entirely behind the (one-sided) light's
 //!   plane are pruned; leaves test each light vertex.
 //! - **EV events** (light edge `l0 l1`, blocker vertex `w`) are found by walking from the VE
 //!   candidates along the shadow-volume boundary: the boundary leaves a VE wedge `(v, e)`
@@ -413,8 +414,8 @@ pub fn find_events(mesh: &Mesh, trees: &MeshEdgeTrees, rings: Option<&VertexRing
             let mut cand: Vec<(u32, u32)> = Vec::new();
             trees.silhouette.query(
                 &mut cand,
-                |n| {
-                    if !front.may_contain(&n.plo, &n.phi) || n.facing(lo, hi).sign_is_fixed() {
+                |n, d| {
+                    if !front.may_contain(&n.plo, &n.phi) || n.facing_tight(d, lo, hi).sign_is_fixed() {
                         Visit::Skip
                     } else {
                         Visit::Test
