@@ -652,6 +652,7 @@ impl EdgeTree {
             }
             if !node.is_leaf() {
                 prefetch(&self.nodes[node.right as usize]);
+                prefetch(&self.spreads[node.right as usize]);
                 stack[sp] = node.right;
                 stack[sp + 1] = at + 1;
                 sp += 2;
