@@ -178,9 +178,9 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         let e = Vec3A::from(*eye);
         let (mut nodes, mut lanes) = (0usize, 0usize);
         tree.traverse(
-            |n, d| {
+            |n| {
                 nodes += 1;
-                if n.facing_tight(d, e, e).sign_is_fixed() {
+                if n.facing_tight(e, e).sign_is_fixed() {
                     Visit::Skip
                 } else {
                     Visit::Test
@@ -193,7 +193,7 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         // The same with the paper's interval test alone (what the spread bound saves).
         let (mut nodes, mut lanes) = (0usize, 0usize);
         tree.traverse(
-            |n, _| {
+            |n| {
                 nodes += 1;
                 if n.facing(e, e).sign_is_fixed() {
                     Visit::Skip

@@ -414,8 +414,8 @@ pub fn find_events(mesh: &Mesh, trees: &MeshEdgeTrees, rings: Option<&VertexRing
             let mut cand: Vec<(u32, u32)> = Vec::new();
             trees.silhouette.query(
                 &mut cand,
-                |n, d| {
-                    if !front.may_contain(&n.plo, &n.phi) || n.facing_tight(d, lo, hi).sign_is_fixed() {
+                |n| {
+                    if !front.may_contain(&n.plo, &n.phi) || n.facing_tight(lo, hi).sign_is_fixed() {
                         Visit::Skip
                     } else {
                         Visit::Test

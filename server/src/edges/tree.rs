@@ -134,10 +134,15 @@ impl Block {
     }
 }
 
-/// A tree node: normal box, position box, and its blocks `start..end` in tree order, of
-/// which the first `stored` hold the edges stored at this node. `right == 0` marks a leaf
-/// (all its blocks are stored); otherwise the left child is the next node and the right
-/// child is `right`.
+/// Marks a leaf in [`Node::link`].
+const LEAF: u32 = 1 << 31;
+
+/// A tree node, one cache line: normal box, position box, the node's [`Spread`]
+/// `dlo..dhi`, and the first of its blocks in tree order, `start`. `link` is the right
+/// child's index for an internal node (the left child is the next node, and the blocks
+/// stored at the node end where the left child's begin), or [`LEAF`] plus the number of
+/// blocks for a leaf (all of them stored). Where a subtree's blocks end is kept apart
+/// (`EdgeTree::ends`): only taking a subtree whole needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(64))]
 pub struct Node {
@@ -145,16 +150,25 @@ pub struct Node {
     pub nhi: [f32; 3],
     pub plo: [f32; 3],
     pub phi: [f32; 3],
+    pub dlo: f32,
+    pub dhi: f32,
     pub start: u32,
-    pub stored: u32,
-    pub end: u32,
-    pub right: u32,
+    pub link: u32,
 }
 
 impl Node {
     #[inline(always)]
     pub fn is_leaf(&self) -> bool {
-        self.right == 0
+        self.link & LEAF != 0
+    }
+    /// The right child of an internal node.
+    #[inline(always)]
+    pub fn right(&self) -> u32 {
+        self.link
+    }
+    #[inline(always)]
+    pub fn spread(&self) -> Spread {
+        Spread { lo: self.dlo, hi: self.dhi }
     }
     #[inline(always)]
     pub fn normals(&self) -> IVec3 {
@@ -193,8 +207,7 @@ impl Node {
     /// the position box (inside it, since f32 rounding is monotone and halving is exact).
     #[inline(always)]
     pub fn centre(&self) -> Vec3A {
-        let v = |a: &[f32; 3]| Vec3A::new(a[0], a[1], a[2]);
-        (v(&self.plo) + v(&self.phi)) * 0.5
+        centre_of(&self.plo, &self.phi)
     }
 
     /// Equation 1 over the node, bounded twice (beyond the paper): the interval of
@@ -213,7 +226,8 @@ impl Node {
     /// own f32 value is within `4.01·2⁻²⁴ M` of the exact one: `16·2⁻²⁴ M` covers them all.
     /// Tested against f64 and the leaf test.
     #[inline(always)]
-    pub fn facing_tight(&self, d: Spread, eye_lo: Vec3A, eye_hi: Vec3A) -> Interval {
+    pub fn facing_tight(&self, eye_lo: Vec3A, eye_hi: Vec3A) -> Interval {
+        let d = self.spread();
         let v = |a: &[f32; 3]| Vec3A::new(a[0], a[1], a[2]);
         let (nlo, nhi) = (v(&self.nlo), v(&self.nhi));
         let (plo, phi) = (v(&self.plo), v(&self.phi));
@@ -225,7 +239,7 @@ impl Node {
         let mag = nlo.abs().max(nhi.abs()) * vlo.abs().max(vhi.abs());
         let m = mag.x + mag.y + mag.z;
         let slack = m * (8.0 / 16_777_216.0);
-        let centre = (plo + phi) * 0.5;
+        let centre = centre_of(&self.plo, &self.phi);
         let (wlo, whi) = (eye_lo - centre, eye_hi - centre);
         let (a, b, c, e) = (nlo * wlo, nlo * whi, nhi * wlo, nhi * whi);
         let mn2 = a.min(b).min(c.min(e));
@@ -239,8 +253,14 @@ impl Node {
 
 /// The interval `D` of `n · (p - c)` over the edges below a node (both face normals `n` of
 /// each, at the point `p` the leaf test uses, the edge's first end point) for the node's
-/// [`Node::centre`] `c`: computed in f64 at build and rounded outward to f32. Kept beside
-/// the nodes (`EdgeTree::spreads`, same index) so a node stays one cache line.
+/// [`Node::centre`] `c`: computed in f64 at build and rounded outward to f32.
+/// The centre of the box `[lo, hi]` (the same bits at build and query).
+#[inline(always)]
+fn centre_of(lo: &[f32; 3], hi: &[f32; 3]) -> Vec3A {
+    let v = |a: &[f32; 3]| Vec3A::new(a[0], a[1], a[2]);
+    (v(lo) + v(hi)) * 0.5
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Spread {
     pub lo: f32,
@@ -317,8 +337,8 @@ impl TreeParams {
 #[derive(Debug, Clone, Default)]
 pub struct EdgeTree {
     pub nodes: Vec<Node>,
-    /// Each node's [`Spread`] (same index as `nodes`).
-    pub spreads: Vec<Spread>,
+    /// Where each node's subtree's blocks end (same index as `nodes`).
+    pub ends: Vec<u32>,
     /// Edges in tree order, four to a block; every node's stored edges start a new block.
     pub blocks: Vec<Block>,
     /// Number of edges (lanes in use).
@@ -589,13 +609,10 @@ impl EdgeTree {
             EdgeRecord { p: pos[e.v[0] as usize], n0: e.normals[0], n1: e.normals[1], edge: it.edge }
         };
         let blocks = to_blocks(&mut nodes, &items, record);
-        let spreads = nodes
-            .par_iter()
-            .with_min_len(256)
-            .map(|n| Spread::of(&blocks[n.start as usize..n.end as usize], n.centre()))
-            .collect();
+        let ends = nodes.iter().map(|n| n.end).collect();
+        let nodes: Vec<Node> = nodes.par_iter().with_min_len(256).map(|n| n.finish(&blocks)).collect();
         let (upper, frontier) = split_for_parallel(&nodes);
-        EdgeTree { nodes, spreads, blocks, len: items.len(), upper, frontier, parallel_from: PARALLEL_QUERY_EDGES }
+        EdgeTree { nodes, ends, blocks, len: items.len(), upper, frontier, parallel_from: PARALLEL_QUERY_EDGES }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -607,7 +624,7 @@ impl EdgeTree {
     /// (`whole == false`: each edge needs the leaf test) and all blocks of every subtree
     /// taken (`whole == true`).
     #[inline]
-    pub fn traverse(&self, enter: impl FnMut(&Node, Spread) -> Visit, blocks: impl FnMut(&[Block], bool)) {
+    pub fn traverse(&self, enter: impl FnMut(&Node) -> Visit, blocks: impl FnMut(&[Block], bool)) {
         if !self.nodes.is_empty() {
             self.traverse_from(0, enter, blocks);
         }
@@ -618,7 +635,7 @@ impl EdgeTree {
     /// first blocks prefetched and its range queued, and ranges are handed to `blocks`
     /// [`PIPELINE`] nodes later, by which time their cache lines have arrived.
     #[inline]
-    fn traverse_from(&self, root: u32, mut enter: impl FnMut(&Node, Spread) -> Visit, mut blocks: impl FnMut(&[Block], bool)) {
+    fn traverse_from(&self, root: u32, mut enter: impl FnMut(&Node) -> Visit, mut blocks: impl FnMut(&[Block], bool)) {
         let mut stack = [0u32; STACK];
         stack[0] = root;
         let mut sp = 1;
@@ -642,23 +659,25 @@ impl EdgeTree {
             sp -= 1;
             let at = stack[sp];
             let node = &self.nodes[at as usize];
-            match enter(node, self.spreads[at as usize]) {
+            match enter(node) {
                 Visit::Skip => continue,
                 Visit::TakeAll => {
-                    defer(node.start, node.end, true, &mut blocks);
+                    defer(node.start, self.ends[at as usize], true, &mut blocks);
                     continue;
                 }
                 Visit::Test => {}
             }
-            if !node.is_leaf() {
-                prefetch(&self.nodes[node.right as usize]);
-                prefetch(&self.spreads[node.right as usize]);
-                stack[sp] = node.right;
+            let stored_end = if node.is_leaf() {
+                node.start + (node.link & !LEAF)
+            } else {
+                prefetch(&self.nodes[node.right() as usize]);
+                stack[sp] = node.right();
                 stack[sp + 1] = at + 1;
                 sp += 2;
-            }
-            if node.stored > 0 {
-                defer(node.start, node.start + node.stored, false, &mut blocks);
+                self.nodes[at as usize + 1].start
+            };
+            if stored_end > node.start {
+                defer(node.start, stored_end, false, &mut blocks);
             }
         }
         for k in 0..len {
@@ -674,7 +693,7 @@ impl EdgeTree {
     pub fn query<T: Send>(
         &self,
         out: &mut Vec<T>,
-        enter: impl Fn(&Node, Spread) -> Visit + Sync,
+        enter: impl Fn(&Node) -> Visit + Sync,
         blocks: impl Fn(&[Block], bool, &mut Vec<T>) + Sync,
     ) {
         if self.nodes.is_empty() {
@@ -688,10 +707,9 @@ impl EdgeTree {
         // the subtrees below are queried on their own. A frontier node is pruned whenever an
         // ancestor would be, since its interval lies inside theirs.
         for &u in &self.upper {
-            let node = &self.nodes[u as usize];
-            let s = node.start as usize;
-            if node.stored > 0 && enter(node, self.spreads[u as usize]) != Visit::Skip {
-                blocks(&self.blocks[s..s + node.stored as usize], false, out);
+            let stored = self.stored(u);
+            if !stored.is_empty() && enter(&self.nodes[u as usize]) != Visit::Skip {
+                blocks(&self.blocks[stored], false, out);
             }
         }
         let parts: Vec<Vec<T>> = self
@@ -714,7 +732,7 @@ impl EdgeTree {
         let e = Vec3A::from(eye);
         self.query(
             out,
-            |n, d| if n.facing_tight(d, e, e).sign_is_fixed() { Visit::Skip } else { Visit::Test },
+            |n| if n.facing_tight(e, e).sign_is_fixed() { Visit::Skip } else { Visit::Test },
             |blocks, _, out| {
                 for b in blocks {
                     b.select(eye, |a, b| a ^ b, |i| out.push(i));
@@ -730,8 +748,8 @@ impl EdgeTree {
         let e = Vec3A::from(eye);
         self.query(
             out,
-            |n, d| {
-                let f = n.facing_tight(d, e, e);
+            |n| {
+                let f = n.facing_tight(e, e);
                 if f.all_non_positive() {
                     Visit::Skip
                 } else if f.all_positive() {
@@ -752,18 +770,33 @@ impl EdgeTree {
         );
     }
 
+    /// The blocks stored at node `at` (all of a leaf's).
+    #[inline(always)]
+    pub fn stored(&self, at: u32) -> std::ops::Range<usize> {
+        let n = &self.nodes[at as usize];
+        let end = if n.is_leaf() { n.start + (n.link & !LEAF) } else { self.nodes[at as usize + 1].start };
+        n.start as usize..end as usize
+    }
+
+    /// All blocks of the subtree at node `at`.
+    pub fn subtree(&self, at: u32) -> std::ops::Range<usize> {
+        self.nodes[at as usize].start as usize..self.ends[at as usize] as usize
+    }
+
     /// Statistics of the tree's shape.
     pub fn stats(&self) -> TreeStats {
         let leaves = self.nodes.iter().filter(|n| n.is_leaf()).count();
-        let stored_internal: usize =
-            self.nodes.iter().filter(|n| !n.is_leaf()).map(|n| n.stored as usize).sum();
+        let stored_internal: usize = (0..self.nodes.len() as u32)
+            .filter(|&i| !self.nodes[i as usize].is_leaf())
+            .map(|i| self.stored(i).len())
+            .sum();
         let mut depth = 0;
         let mut d = vec![0u32; self.nodes.len()];
         for (i, n) in self.nodes.iter().enumerate() {
             depth = depth.max(d[i]);
             if !n.is_leaf() {
                 d[i + 1] = d[i] + 1;
-                d[n.right as usize] = d[i] + 1;
+                d[n.right() as usize] = d[i] + 1;
             }
         }
         TreeStats {
@@ -772,7 +805,7 @@ impl EdgeTree {
             leaves,
             stored_at_internal_nodes: stored_internal,
             depth: depth as usize,
-            bytes: self.nodes.len() * std::mem::size_of::<Node>() + self.blocks.len() * std::mem::size_of::<Block>(),
+            bytes: self.nodes.len() * (std::mem::size_of::<Node>() + 4) + self.blocks.len() * std::mem::size_of::<Block>(),
         }
     }
 }
@@ -808,7 +841,7 @@ fn prefetch<T>(x: &T) {
 
 /// Lays the edges out in blocks: every node's stored edges start a new block. Rewrites the
 /// nodes' edge ranges (item indices) into block ranges.
-fn to_blocks(nodes: &mut [Node], items: &[Item], record: impl Fn(&Item) -> EdgeRecord + Sync) -> Vec<Block> {
+fn to_blocks(nodes: &mut [BuildNode], items: &[Item], record: impl Fn(&Item) -> EdgeRecord + Sync) -> Vec<Block> {
     // Nodes are in depth-first order and so are their stored item ranges.
     let mut first_block = Vec::with_capacity(nodes.len());
     let mut nblocks = 0u32;
@@ -866,7 +899,7 @@ fn split_for_parallel(nodes: &[Node]) -> (Vec<u32>, Vec<u32>) {
             } else {
                 upper.push(i);
                 next.push(i + 1);
-                next.push(n.right);
+                next.push(n.right());
             }
         }
         if next.is_empty() {
@@ -888,8 +921,44 @@ pub struct TreeStats {
     pub bytes: usize,
 }
 
-fn node_from(b: &Bounds, start: usize, stored: usize, end: usize) -> Node {
-    Node {
+/// A node while the tree is built: its edges (later blocks) `start..end` in tree order, of
+/// which the first `stored` are stored at the node; `right == 0` marks a leaf.
+#[derive(Debug, Clone, Copy)]
+struct BuildNode {
+    nlo: [f32; 3],
+    nhi: [f32; 3],
+    plo: [f32; 3],
+    phi: [f32; 3],
+    start: u32,
+    stored: u32,
+    end: u32,
+    right: u32,
+}
+
+impl BuildNode {
+    fn is_leaf(&self) -> bool {
+        self.right == 0
+    }
+
+    /// The final node, once `start..end` are block ranges, with its spread.
+    fn finish(&self, blocks: &[Block]) -> Node {
+        let d = Spread::of(&blocks[self.start as usize..self.end as usize], centre_of(&self.plo, &self.phi));
+        assert!(self.stored < LEAF, "too many blocks at one leaf");
+        Node {
+            nlo: self.nlo,
+            nhi: self.nhi,
+            plo: self.plo,
+            phi: self.phi,
+            dlo: d.lo,
+            dhi: d.hi,
+            start: self.start,
+            link: if self.is_leaf() { LEAF | self.stored } else { self.right },
+        }
+    }
+}
+
+fn node_from(b: &Bounds, start: usize, stored: usize, end: usize) -> BuildNode {
+    BuildNode {
         nlo: b.nlo.to_array(),
         nhi: b.nhi.to_array(),
         plo: b.plo.to_array(),
@@ -905,7 +974,7 @@ fn node_from(b: &Bounds, start: usize, stored: usize, end: usize) -> Node {
 /// its nodes to `nodes` in depth-first order, the subtree's root first. Progress is
 /// reported per sequential chunk (nodes of at most [`PARALLEL_ITEMS`] edges) and for edges
 /// stored at the big nodes above them, so reporting costs nothing measurable.
-fn build_node(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx, sum: Summary) {
+fn build_node(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<BuildNode>, ctx: &Ctx, sum: Summary) {
     let n = items.len();
     let big = n > PARALLEL_ITEMS;
     build_rec(items, start, depth, nodes, ctx, sum);
@@ -943,7 +1012,7 @@ fn partition3(items: &mut [Item], class: impl Fn(&Item) -> u8) -> (usize, usize,
 /// One node: `sum` summarises `items`. Two passes over the items per node: binning (which
 /// also counts the edges that stay) and a three-way partition (stay / left / right) that
 /// also summarises the two children.
-fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Node>, ctx: &Ctx, sum: Summary) {
+fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<BuildNode>, ctx: &Ctx, sum: Summary) {
     let n = items.len();
     let big = n > PARALLEL_ITEMS;
     let me = nodes.len();
@@ -1008,7 +1077,7 @@ fn build_rec(items: &mut [Item], start: usize, depth: usize, nodes: &mut Vec<Nod
             || build_node(right, rstart, depth + 1, &mut rv, ctx, rs),
         );
         let base = nodes.len() as u32;
-        let shift = |v: &mut Vec<Node>, by: u32| {
+        let shift = |v: &mut Vec<BuildNode>, by: u32| {
             for x in v.iter_mut() {
                 if x.right != 0 {
                     x.right += by;
@@ -1112,10 +1181,22 @@ mod tests {
             assert_eq!(seen, edges);
             for (i, n) in t.nodes.iter().enumerate() {
                 if !n.is_leaf() {
-                    let (l, r) = (&t.nodes[i + 1], &t.nodes[n.right as usize]);
-                    assert_eq!(l.start, n.start + n.stored);
-                    assert_eq!(l.end, r.start);
-                    assert_eq!(r.end, n.end);
+                    let (l, r) = (i as u32 + 1, n.right());
+                    assert_eq!(t.subtree(l).start, t.stored(i as u32).end);
+                    assert_eq!(t.subtree(l).end, t.subtree(r).start);
+                    assert_eq!(t.subtree(r).end, t.subtree(i as u32).end);
+                } else {
+                    assert_eq!(t.stored(i as u32), t.subtree(i as u32));
+                }
+                // The spread holds every face's `n · (p - c)` below the node.
+                let c = n.centre();
+                for b in &t.blocks[t.subtree(i as u32)] {
+                    for r in (0..4).filter_map(|k| b.record(k)) {
+                        for nn in [r.n0, r.n1] {
+                            let x = (0..3).map(|a| nn[a] as f64 * (r.p[a] as f64 - c[a] as f64)).sum::<f64>();
+                            assert!(n.dlo as f64 <= x && x <= n.dhi as f64, "node {i}: {x} outside {}..{}", n.dlo, n.dhi);
+                        }
+                    }
                 }
             }
             for eye in eyes(200, 3.0) {
@@ -1132,7 +1213,7 @@ mod tests {
     /// A flat-ish patch of `k` edges: points near a random plane (offset far from the origin
     /// or not, of very different sizes), normals near the plane's; the node over them with
     /// its spread, as the build makes them.
-    fn patch(g: &mut crate::rng::Rng, k: usize) -> (Node, Spread, Vec<Block>, Vec<EdgeRecord>) {
+    fn patch(g: &mut crate::rng::Rng, k: usize) -> (Node, Vec<Block>, Vec<EdgeRecord>) {
         let scale = 10f32.powi(g.below(7) as i32 - 3);
         let origin = if g.chance(0.5) { g.vec3(-100.0, 100.0) * scale } else { Vec3::ZERO };
         let axis = g.direction();
@@ -1154,9 +1235,8 @@ mod tests {
         for (i, r) in recs.iter().enumerate() {
             blocks[i / 4].set(i % 4, r);
         }
-        let node = node_from(&b, 0, k, k);
-        let d = Spread::of(&blocks, node.centre());
-        (node, d, blocks, recs)
+        let node = node_from(&b, 0, blocks.len(), blocks.len()).finish(&blocks);
+        (node, blocks, recs)
     }
 
     /// The spread bound against f64 and the leaf test: for random flat-ish patches and eyes
@@ -1169,7 +1249,7 @@ mod tests {
         let (mut pruned, mut pruned_interval_only, mut cases) = (0, 0, 0);
         for _ in 0..20_000 {
             let k = 1 + g.below(12);
-            let (node, d, blocks, recs) = patch(&mut g, k);
+            let (node, blocks, recs) = patch(&mut g, k);
             assert_eq!(blocks.iter().flat_map(|b| b.edges()).count(), k);
             let size = (Vec3::from(node.phi) - Vec3::from(node.plo)).length().max(1e-30);
             let centre = Vec3::from(node.centre());
@@ -1189,7 +1269,7 @@ mod tests {
                 } else {
                     (eye, eye)
                 };
-                let iv = node.facing_tight(d, elo.into(), ehi.into());
+                let iv = node.facing_tight(elo.into(), ehi.into());
                 cases += 1;
                 pruned += iv.sign_is_fixed() as usize;
                 pruned_interval_only += node.facing(elo.into(), ehi.into()).sign_is_fixed() as usize;
