@@ -175,36 +175,31 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         if got != want {
             mismatches += 1;
         }
+        // Nodes visited and edge lanes tested with both node bounds, and with the paper's
+        // interval test alone (what the spread bound saves).
         let e = Vec3A::from(*eye);
-        let (mut nodes, mut lanes) = (0usize, 0usize);
-        tree.traverse(
-            |n| {
-                nodes += 1;
-                if n.facing_tight(e, e).sign_is_fixed() {
-                    Visit::Skip
-                } else {
-                    Visit::Test
-                }
-            },
-            |b, _| lanes += b.len() * 4,
-        );
-        visited.push(nodes as f64);
-        tested.push(lanes as f64);
-        // The same with the paper's interval test alone (what the spread bound saves).
-        let (mut nodes, mut lanes) = (0usize, 0usize);
-        tree.traverse(
-            |n| {
-                nodes += 1;
-                if n.facing(e, e).sign_is_fixed() {
-                    Visit::Skip
-                } else {
-                    Visit::Test
-                }
-            },
-            |b, _| lanes += b.len() * 4,
-        );
-        visited_interval.push(nodes as f64);
-        tested_interval.push(lanes as f64);
+        let count = |tight: bool| {
+            let (mut nodes, mut lanes) = (0usize, 0usize);
+            tree.traverse(
+                |n| {
+                    nodes += 1;
+                    let f = if tight { n.facing_tight(e, e) } else { n.facing(e, e) };
+                    if f.sign_is_fixed() {
+                        Visit::Skip
+                    } else {
+                        Visit::Test
+                    }
+                },
+                |b, _| lanes += b.len() * 4,
+            );
+            (nodes as f64, lanes as f64)
+        };
+        let (n, l) = count(true);
+        visited.push(n);
+        tested.push(l);
+        let (n, l) = count(false);
+        visited_interval.push(n);
+        tested_interval.push(l);
     }
     let (bm, tm, t1) = (median(&brute_ms), median(&tree_ms), median(&tree1_ms));
     let out = json!({
