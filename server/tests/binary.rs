@@ -5,7 +5,7 @@ mod common;
 use common::{open, start_msg, Worker};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn server_bin() -> &'static str {
     env!("CARGO_BIN_EXE_edgepoint-server")
@@ -63,14 +63,17 @@ async fn serves_sessions_and_health_and_exits_on_sigterm() {
     v.started().await;
     v.frame_with_samples(20).await;
 
-    let t0 = Instant::now();
     let pid = child.id().to_string();
     assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
     // The session stream ends and the process exits cleanly.
     while let Ok(Some(_)) =
         tokio::time::timeout(Duration::from_secs(10), v.rx.message()).await.expect("stream ends after SIGTERM")
     {}
-    let status = tokio::task::spawn_blocking(move || child.wait().unwrap()).await.unwrap();
+    // A liveness bound, not a speed check: a process that never exits fails here instead of
+    // hanging the suite.
+    let status = tokio::time::timeout(Duration::from_secs(60), tokio::task::spawn_blocking(move || child.wait().unwrap()))
+        .await
+        .expect("the server exits after SIGTERM")
+        .unwrap();
     assert!(status.success(), "exit status {status:?}");
-    assert!(t0.elapsed() < Duration::from_secs(8), "graceful exit took {:?}", t0.elapsed());
 }

@@ -21,16 +21,13 @@ async fn worker_samples(cl: &edgepoint_tests::LocalCluster, i: usize) -> f64 {
 
 /// Waits until worker `i` reports more shaded samples than `than`.
 async fn worker_shades(cl: &edgepoint_tests::LocalCluster, client: &mut SessionClient, last: &mut Instant, i: usize, than: f64) {
-    let t0 = Instant::now();
-    loop {
-        let now = worker_samples(cl, i).await;
-        if now > than {
-            return;
+    let shaded = async {
+        while worker_samples(cl, i).await <= than {
+            // Keep taking frames meanwhile (the viewer side must not back up).
+            frames_until(client, last, WAIT, |_, s| s.frames >= 3).await.unwrap();
         }
-        assert!(t0.elapsed() < WAIT, "worker {i} shaded nothing new within {WAIT:?}");
-        // Keep taking frames meanwhile (the viewer side must not back up).
-        frames_until(client, last, WAIT, |_, s| s.frames >= 3).await.unwrap();
-    }
+    };
+    tokio::time::timeout(WAIT, shaded).await.unwrap_or_else(|_| panic!("worker {i} shaded nothing new within {WAIT:?}"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -15,37 +15,30 @@ fn eighth(f: f64) -> u32 {
 /// Records the crossings of the 2D segment `a`-`b` (pixel coordinates) with the boundary
 /// lines of a `w` x `h` image (and the centre lines when `centres` is not empty).
 pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], a: [f64; 2], b: [f64; 2]) {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let d = [b[0] - a[0], b[1] - a[1]];
     for (offset, centre) in [(0.0, false), (0.5, true)] {
         if centre && centres.is_empty() {
             continue;
         }
-        if dx != 0.0 {
-            let (lo, hi) = (a[0].min(b[0]) - offset, a[0].max(b[0]) - offset);
-            for xl in lo.ceil().max(0.0) as i64..=hi.floor().min((w - usize::from(centre)) as f64) as i64 {
-                let t = (xl as f64 + offset - a[0]) / dx;
-                let y = a[1] + t * dy;
-                if y >= 0.0 && y < h as f64 {
-                    let yy = y.floor();
-                    if centre {
-                        centres[yy as usize * w + xl as usize] |= 1 << eighth(y - yy);
-                    } else {
-                        sides[yy as usize * (w + 1) + xl as usize] |= 1 << eighth(y - yy);
-                    }
-                }
+        // Axis 0: vertical lines x = l (+ offset), crossings at y; axis 1: horizontal lines.
+        for axis in 0..2 {
+            let (u, v) = (axis, 1 - axis);
+            if d[u] == 0.0 {
+                continue;
             }
-        }
-        if dy != 0.0 {
-            let (lo, hi) = (a[1].min(b[1]) - offset, a[1].max(b[1]) - offset);
-            for yl in lo.ceil().max(0.0) as i64..=hi.floor().min((h - usize::from(centre)) as f64) as i64 {
-                let t = (yl as f64 + offset - a[1]) / dy;
-                let x = a[0] + t * dx;
-                if x >= 0.0 && x < w as f64 {
-                    let xx = x.floor();
+            let (lines, across) = if axis == 0 { (w, h) } else { (h, w) };
+            let (lo, hi) = (a[u].min(b[u]) - offset, a[u].max(b[u]) - offset);
+            for l in lo.ceil().max(0.0) as i64..=hi.floor().min((lines - usize::from(centre)) as f64) as i64 {
+                let t = (l as f64 + offset - a[u]) / d[u];
+                let q = a[v] + t * d[v];
+                if q >= 0.0 && q < across as f64 {
+                    let qq = q.floor();
+                    let (row, col) = if axis == 0 { (qq as usize, l as usize) } else { (l as usize, qq as usize) };
+                    let bit = 1u16 << (8 * axis as u32 + eighth(q - qq));
                     if centre {
-                        centres[yl as usize * w + xx as usize] |= 1 << (8 + eighth(x - xx));
+                        centres[row * w + col] |= bit;
                     } else {
-                        sides[yl as usize * (w + 1) + xx as usize] |= 1 << (8 + eighth(x - xx));
+                        sides[row * (w + 1) + col] |= bit;
                     }
                 }
             }

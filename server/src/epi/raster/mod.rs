@@ -309,41 +309,33 @@ impl Band<'_> {
         let slack = 1e-9 * (1.0 + xa.abs().max(xb.abs()));
         let (xmin, xmax) = (xa.min(xb) - slack, xa.max(xb) + slack);
         if dx != 0.0 {
-            // Vertical lines x = X (and centre lines x = X + 1/2).
-            let lines = |offset: f64, last: usize| {
-                let first = (xmin - offset).ceil().max(0.0);
-                let end = (xmax - offset).floor().min(last as f64);
-                (first as i64, end as i64)
-            };
-            let (x_first, x_last) = lines(0.0, w);
-            for xl in x_first..=x_last {
-                let t = (xl as f64 - s.x0) / dx;
-                let y = s.y0 + t * dy;
-                if !(y >= ylo && y < yhi && y < h as f64 && y >= 0.0) {
+            // Vertical lines x = X (and centre lines x = X + 1/2, whose crossings are culled
+            // against the depth on both sides).
+            for (offset, last) in [(0.0, w), (0.5, w - 1)] {
+                let centre = offset > 0.0;
+                if centre && !self.with_centres {
                     continue;
                 }
-                if culled(inv_depth(t), xl as f64, y, false) {
-                    c.culled += 1;
-                    continue;
-                }
-                let yy = y.floor();
-                sides[(yy as usize - self.y_lo) * (w + 1) + xl as usize] |= 1 << eighth(y - yy);
-                c.fragments += 1;
-            }
-            if self.with_centres {
-                let (x_first, x_last) = lines(0.5, w - 1);
-                for xl in x_first..=x_last {
-                    let t = (xl as f64 + 0.5 - s.x0) / dx;
+                let first = (xmin - offset).ceil().max(0.0) as i64;
+                let end = (xmax - offset).floor().min(last as f64) as i64;
+                for xl in first..=end {
+                    let t = (xl as f64 + offset - s.x0) / dx;
                     let y = s.y0 + t * dy;
                     if !(y >= ylo && y < yhi && y < h as f64 && y >= 0.0) {
                         continue;
                     }
-                    if culled(inv_depth(t), xl as f64, y, true) {
+                    if culled(inv_depth(t), xl as f64, y, centre) {
                         c.culled += 1;
                         continue;
                     }
                     let yy = y.floor();
-                    centres[(yy as usize - self.y_lo) * w + xl as usize] |= 1 << eighth(y - yy);
+                    let row = yy as usize - self.y_lo;
+                    let bit = 1u16 << eighth(y - yy);
+                    if centre {
+                        centres[row * w + xl as usize] |= bit;
+                    } else {
+                        sides[row * (w + 1) + xl as usize] |= bit;
+                    }
                     c.fragments += 1;
                 }
             }
