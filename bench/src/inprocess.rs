@@ -9,7 +9,8 @@ use edgepoint_scene::camera::CameraFrame;
 use edgepoint_scene::NoProgress;
 use edgepoint_server::reference::{subpixel_position, LogProgress, ReferenceOptions};
 use edgepoint_server::render_cache::{CacheConfig, RenderCache, Sample};
-use edgepoint_server::session::{splitmix64, TripleKey};
+use edgepoint_server::rng::mix64;
+use edgepoint_server::session::TripleKey;
 use edgepoint_server::stage_times::StageTimes;
 use edgepoint_scene::Progress;
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
@@ -66,7 +67,7 @@ impl Staged {
                     RayRequest { id: (c << 16 | i) as u64, pixel: [p.x, p.y], origin, direction }
                 })
                 .collect();
-            let shaded = shade_batch(&self.loaded, &inst, &self.spec, splitmix64(seed ^ c as u64), &requests);
+            let shaded = shade_batch(&self.loaded, &inst, &self.spec, mix64(seed ^ c as u64), &requests);
             triples.extend(shaded.triples.iter().map(|&[light, blocker, receiver]| TripleKey { light, blocker, receiver }));
             for (s, r) in shaded.samples.iter().zip(&requests) {
                 out.push(match s.hit {
@@ -106,7 +107,7 @@ impl Staged {
                     RayRequest { id: ((y as u64 * width as u64 + x as u64) * spp as u64) + s as u64, pixel: [x, y], origin, direction }
                 })
                 .collect();
-            let shaded = shade_batch(&self.loaded, &inst, &self.spec, splitmix64(seed ^ y0 as u64), &requests);
+            let shaded = shade_batch(&self.loaded, &inst, &self.spec, mix64(seed ^ y0 as u64), &requests);
             for px in shaded.samples.chunks(spp as usize) {
                 let sum: Vec3 = px.iter().map(|s| if s.rgb.is_finite() { s.rgb } else { Vec3::ZERO }).sum();
                 pixels.push(sum / spp as f32);
@@ -214,10 +215,10 @@ pub fn jittered_picks(width: u32, height: u32, density: f64, seed: u64) -> Vec<P
     let mut out = Vec::new();
     for y in 0..height {
         for x in 0..width {
-            let h = splitmix64(seed ^ ((y as u64) << 32 | x as u64));
+            let h = mix64(seed ^ ((y as u64) << 32 | x as u64));
             let rank = unit(h);
             if (rank as f64) < density {
-                let j = splitmix64(h);
+                let j = mix64(h);
                 out.push(Pick { x, y, sx: x as f32 + unit(j).min(0.999_99), sy: y as f32 + unit(j << 24).min(0.999_99), rank });
             }
         }

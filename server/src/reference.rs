@@ -10,7 +10,7 @@
 //! [`render_reference`] is `async`: await it on a tokio runtime (the dispatcher's links run
 //! there). It must be the dispatcher's only consumer of answers while it runs (open a
 //! dispatcher for it; do not share one with a live session).
-use crate::session::splitmix64;
+use crate::rng::mix64;
 use crate::workers::{DispatchError, Dispatcher};
 use edgepoint_proto as pb;
 use edgepoint_scene::{Camera, Progress};
@@ -78,9 +78,9 @@ pub fn subpixel_position(x: u32, y: u32, s: u32, spp: u32, seed: u64) -> (f32, f
     let nx = (spp as f64).sqrt().ceil() as u32;
     let ny = spp.div_ceil(nx);
     let cells = nx * ny;
-    let h = splitmix64(seed ^ ((y as u64) << 32 | x as u64));
+    let h = mix64(seed ^ ((y as u64) << 32 | x as u64));
     let cell = ((h % cells as u64) as u32 + s) % cells;
-    let j = splitmix64(h ^ (s as u64 + 1));
+    let j = mix64(h ^ (s as u64 + 1));
     let jx = (j >> 40) as f32 / (1u64 << 24) as f32;
     let jy = ((j >> 16) & 0xff_ffff) as f32 / (1u64 << 24) as f32;
     let (cx, cy) = (cell % nx, cell / nx);
@@ -144,7 +144,7 @@ pub async fn render_reference_with(
             shader: shader.to_string(),
             params: params.clone(),
             requests,
-            seed: splitmix64(seed ^ b.wrapping_mul(0x9e37_79b9)),
+            seed: mix64(seed ^ b.wrapping_mul(0x9e37_79b9)),
         }
     });
 

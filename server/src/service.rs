@@ -15,7 +15,8 @@
 //! metrics, and every sent frame feeds the frame-time and frame-interval histograms.
 use crate::metrics::{Refusal, SessionMetrics};
 use crate::reference::LogProgress;
-use crate::session::{camera_from_wire, camera_to_wire, splitmix64, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
+use crate::rng::mix64;
+use crate::session::{camera_from_wire, camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
 use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
 use edgepoint_proto::auth::{constant_time_eq, parse_bearer, AUTHORIZATION};
@@ -349,7 +350,7 @@ impl RendererService {
 
         let n = self.state.next.fetch_add(1, Ordering::Relaxed);
         let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
-        let seed = splitmix64(nanos ^ n.rotate_left(32));
+        let seed = mix64(nanos ^ n.rotate_left(32));
         let id = format!("{seed:016x}");
         let started = started_msg(&id, &hash, &scene, &camera, self.pool.len());
 

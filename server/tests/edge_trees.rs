@@ -8,7 +8,8 @@ use edgepoint_server::edges::brute;
 use edgepoint_server::edges::events::{find_events, find_events_brute, LocalLight, VertexRings};
 use edgepoint_server::edges::geometric::{MeshEdgeTrees, SharpTree};
 use glam::Vec3;
-use edgepoint_server::edges::sample::{viewpoints, Rng};
+use edgepoint_server::edges::sample::viewpoints;
+use edgepoint_server::rng::Rng;
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 

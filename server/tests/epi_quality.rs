@@ -9,7 +9,7 @@ use edgepoint_server::image_metrics::psnr;
 use edgepoint_server::reference::subpixel_position;
 use edgepoint_server::render_cache::holes::HoleFill;
 use edgepoint_server::render_cache::{CacheConfig, RenderCache, Sample};
-use edgepoint_server::session::splitmix64;
+use edgepoint_server::rng::mix64;
 use edgepoint_server::stage_times::StageTimes;
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
 use glam::{Affine3A, Vec3};
@@ -48,9 +48,9 @@ fn edge_and_point_beats_the_render_cache_from_the_same_samples() {
         let mut requests = Vec::new();
         for y in 0..h {
             for x in 0..w {
-                let r = splitmix64(((y as u64) << 32) | x as u64);
+                let r = mix64(((y as u64) << 32) | x as u64);
                 if ((r >> 40) as f64 / (1u64 << 24) as f64) < density {
-                    let j = splitmix64(r);
+                    let j = mix64(r);
                     let (u, v) = ((j >> 40) as f32 / (1u64 << 24) as f32, ((j >> 16) & 0xff_ffff) as f32 / (1u64 << 24) as f32);
                     let (origin, direction) = cam.ray(x as f32 + u, y as f32 + v);
                     requests.push(RayRequest { id: requests.len() as u64, pixel: [x, y], origin, direction });

@@ -15,7 +15,7 @@
 //! Triples come the way the workers find them: shadow rays from points on every receiver.
 use edgepoint_scene::{Light, NoProgress, Scene};
 use edgepoint_server::edges::finder::EdgeFinder;
-use edgepoint_server::edges::sample::Rng;
+use edgepoint_server::rng::Rng;
 use edgepoint_server::edges::events::{Generator, ShadowEvent};
 use edgepoint_server::edges::{EdgeKind, EdgeSegment};
 use edgepoint_server::session::TripleKey;

@@ -177,7 +177,7 @@ mod tests {
     use super::*;
 
     /// Random values, intervals and points inside them (reproducible).
-    struct Rng(crate::edges::sample::Rng);
+    struct Rng(crate::rng::Rng);
     impl Rng {
         fn next(&mut self) -> u64 {
             self.0.next_u64()
@@ -217,7 +217,7 @@ mod tests {
 
     #[test]
     fn scalar_operations_contain_the_exact_result() {
-        let mut r = Rng(crate::edges::sample::Rng::new(0x9E3779B97F4A7C15));
+        let mut r = Rng(crate::rng::Rng::new(0x9E3779B97F4A7C15));
         for _ in 0..200_000 {
             let (a, b) = (r.interval(), r.interval());
             let (x, y) = (r.inside(a), r.inside(b));
@@ -238,7 +238,7 @@ mod tests {
     /// leaf test [`crate::edges::brute::face_side`] computes, for points inside the boxes.
     #[test]
     fn dot_view_contains_exact_and_leaf_values() {
-        let mut r = Rng(crate::edges::sample::Rng::new(0x2545F4914F6CDD1D));
+        let mut r = Rng(crate::rng::Rng::new(0x2545F4914F6CDD1D));
         let mut sign_fixed = 0;
         for _ in 0..100_000 {
             let n = IVec3 { x: r.interval(), y: r.interval(), z: r.interval() };
@@ -273,7 +273,7 @@ mod tests {
     #[test]
     fn eye_boxes_contain_every_eye() {
         // An interval eye (a light's bounding box) against point eyes inside it.
-        let mut r = Rng(crate::edges::sample::Rng::new(77));
+        let mut r = Rng(crate::rng::Rng::new(77));
         for _ in 0..50_000 {
             let n = IVec3 { x: r.interval(), y: r.interval(), z: r.interval() };
             let p = IVec3 { x: r.interval(), y: r.interval(), z: r.interval() };

@@ -1,9 +1,8 @@
-//! Reproducible random numbers and viewpoints for the edge finder's tests and benchmarks
-//! (paper 000 §6.4 measures silhouettes "from random viewpoints"; the tests compare the
-//! trees with brute force from the same ones).
+//! Reproducible random viewpoints for the edge finder's tests and benchmarks (paper 000
+//! §6.4 measures silhouettes "from random viewpoints"; the tests compare the trees with
+//! brute force from the same ones).
+use crate::rng::Rng;
 use glam::Vec3;
-
-pub use crate::rng::Rng;
 
 /// `n` eyes around the box `bounds`: uniform directions from its centre, at distances
 /// uniform between `near` and `far` times its bounding radius.

@@ -82,7 +82,7 @@ pub struct Sampler {
     err_next: Vec<f32>,
 }
 
-pub(crate) use crate::rng::mix64;
+use crate::rng::mix64;
 
 /// Uniform in [0, 1) from the top 24 bits.
 #[inline]

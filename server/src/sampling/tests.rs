@@ -1,16 +1,7 @@
 //! Tests of prioritized sampling on random priority images.
 use super::*;
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(1);
-        mix64(self.0)
-    }
-    fn f(&mut self) -> f32 {
-        unit(self.next())
-    }
-}
+use crate::rng::Rng;
 
 fn check_picks(out: &[PixelRequest], w: u32, h: u32, budget: usize) {
     assert!(out.len() <= budget.min((w * h) as usize), "{} picks for budget {budget}", out.len());
@@ -27,16 +18,16 @@ fn check_picks(out: &[PixelRequest], w: u32, h: u32, budget: usize) {
 
 #[test]
 fn picks_are_distinct_inside_their_pixels_and_within_budget() {
-    let mut rng = Rng(1);
+    let mut rng = Rng::new(1);
     let cfg = SamplingConfig::default();
     let mut out = Vec::new();
     for case in 0..30 {
-        let (w, h) = (1 + (rng.next() % 90) as u32, 1 + (rng.next() % 70) as u32);
+        let (w, h) = (1 + (rng.next_u64() % 90) as u32, 1 + (rng.next_u64() % 70) as u32);
         let n = (w * h) as usize;
         let mut s = Sampler::new(w, h, case);
-        let weights: Vec<f32> = (0..n).map(|_| if rng.next().is_multiple_of(4) { 0.0 } else { rng.f() * 3.0 }).collect();
+        let weights: Vec<f32> = (0..n).map(|_| if rng.next_u64().is_multiple_of(4) { 0.0 } else { rng.unit() * 3.0 }).collect();
         let ages: Vec<f32> =
-            (0..n).map(|_| if rng.next().is_multiple_of(3) { f32::INFINITY } else { (rng.next() % 200) as f32 }).collect();
+            (0..n).map(|_| if rng.next_u64().is_multiple_of(3) { f32::INFINITY } else { (rng.next_u64() % 200) as f32 }).collect();
         for budget in [0, 1, n / 64 + 1, n / 5, n, n + 17] {
             s.select(&weights, &ages, &cfg, budget, &mut out);
             check_picks(&out, w, h, budget);
@@ -178,18 +169,18 @@ fn budget_from_sparseness() {
 fn scaling_meets_the_budget_with_saturated_pixels() {
     // Water-filling: sum over pixels of min(1, s * p) equals the budget, also when many
     // pixels would exceed 1 with the plain scale budget / sum(p).
-    let mut rng = Rng(77);
+    let mut rng = Rng::new(77);
     for case in 0..40 {
         let (w, h) = (50u32, 40u32);
         let n = (w * h) as usize;
         let mut s = Sampler::new(w, h, case);
-        let hot = rng.f();
+        let hot = rng.unit();
         for p in s.prio.iter_mut() {
-            *p = if rng.f() < hot { 1.0 } else { 0.001 + 0.05 * rng.f() };
+            *p = if rng.unit() < hot { 1.0 } else { 0.001 + 0.05 * rng.unit() };
         }
         let total: f64 = s.prio.iter().map(|&p| p as f64).sum();
         let max = s.prio.iter().cloned().fold(0.0f32, f32::max);
-        let budget = 1 + (rng.next() % (n as u64 - 1)) as usize;
+        let budget = 1 + (rng.next_u64() % (n as u64 - 1)) as usize;
         let scale = s.scale_to_budget(total, max, budget as f64);
         let got: f64 = s.prio.iter().map(|&p| (p * scale).min(1.0) as f64).sum();
         assert!((got - budget as f64).abs() <= 1e-3 * budget as f64 + 0.5, "case {case}: {got} for budget {budget}");

@@ -13,7 +13,8 @@
 //! sleep to the fps cap.
 use super::feedback::ShadingFeedback;
 use super::output::SessionOutput;
-use super::requests::{build_batches, splitmix64, BatchSpec, RequestRing};
+use super::requests::{build_batches, BatchSpec, RequestRing};
+use crate::rng::mix64;
 use super::settings::{camera_from_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
@@ -165,7 +166,7 @@ impl FrameLoop {
             picks: Vec::new(),
             batches: Vec::new(),
             next_batch_id: 0,
-            seed: splitmix64(p.seed ^ 0x5eed),
+            seed: mix64(p.seed ^ 0x5eed),
             sequence: 0,
             start: Instant::now(),
             out,

@@ -22,7 +22,7 @@ pub use edge_source::{EdgeIndexSlot, EdgeSourceStats, SessionEdges, TripleSet};
 pub use feedback::{ObjectSeen, ShadingFeedback, TripleKey, TripleSeen};
 pub use frame_loop::{max_outstanding, SessionCounters, OUTSTANDING_FRAMES, TARGET_SAMPLE_LATENCY};
 pub use output::{SessionOutput, MAX_QUEUED_REJECTIONS};
-pub use requests::{build_batches, splitmix64, BatchSpec, RequestInfo, RequestRing};
+pub use requests::{build_batches, BatchSpec, RequestInfo, RequestRing};
 pub use settings::{
     camera_from_wire, camera_to_wire, resolve_move, Reconstruction, SessionSettings, BATCH_SIZE_RANGE, MAX_AGE_RANGE,
     MAX_FPS_RANGE, SHARP_CUTOFF_RANGE, SPARSENESS_RANGE,

@@ -7,6 +7,7 @@
 //! infinity). Both are remembered in a ring indexed by request id: no hashing, no
 //! allocation per request, and an answer whose slot was reused (it came back very late)
 //! is recognised by its id and ignored.
+use crate::rng::mix64;
 use crate::sampling::PixelRequest;
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
@@ -110,7 +111,7 @@ pub fn build_batches(
                 }
             })
             .collect();
-        *seed = splitmix64(*seed);
+        *seed = mix64(*seed);
         out.push(pb::RequestBatch {
             batch_id: *next_batch_id,
             epoch: spec.epoch,
@@ -122,9 +123,6 @@ pub fn build_batches(
         *next_batch_id += 1;
     }
 }
-
-/// A tiny, well-mixed generator step for batch seeds.
-pub use crate::rng::mix64 as splitmix64;
 
 #[cfg(test)]
 mod tests {
