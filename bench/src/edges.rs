@@ -6,7 +6,9 @@
 //!   with the tree queried on all threads and on one; the tree's shape and how much of it
 //!   a query visits, with both node bounds and with the paper's interval test alone; and
 //!   the floor of any traversal over the same blocks (testing only the blocks that hold a
-//!   silhouette, known in advance).
+//!   silhouette, known in advance); and how many silhouette edges change from one frame to
+//!   the next along orbits at 1, 0.25 and 0.05 degrees per frame (what any reuse of an
+//!   earlier frame's answer would have to keep up with).
 //! - `--scene NAME|PATH`: the whole edge finder on a scene: build times, shadow edges at
 //!   load (every triple a session's shader would report: shadow rays from random surface
 //!   points), then frames from the scene camera: silhouette/sharp/boundary time against
@@ -230,6 +232,7 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         }
     }
     let fl = median(&floor_ms);
+    let churn: Vec<(f32, f64, f64)> = [1.0f32, 0.25, 0.05].iter().map(|&d| orbit_churn(mesh, &tree, d)).collect();
     let (bm, tm, t1) = (median(&brute_ms), median(&tree_ms), median(&tree1_ms));
     let out = json!({
         "mesh": path.display().to_string(),
@@ -257,6 +260,7 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         "floor_blocks_median": median(&floor_blocks),
         "floor_speedup_median": bm / fl.max(1e-9),
         "threads": rayon::current_num_threads(),
+        "orbit_churn": churn.iter().map(|&(d, s, c)| json!({ "degrees_per_frame": d, "silhouettes_median": s, "changed_per_frame_median": c })).collect::<Vec<_>>(),
     });
     let table = format!(
         "{}: {} edges; tree build {:.0} ms ({:.0} ms on one thread; {} nodes, depth {}, {} edges stored at internal nodes)\n\
@@ -281,12 +285,54 @@ fn mesh_run(a: &EdgesArgs, path: PathBuf) -> Result<()> {
         median(&floor_blocks),
         fl,
         bm / fl.max(1e-9)
-    );
+    ) + &churn
+        .iter()
+        .map(|(d, s, c)| format!("orbit at {d} deg per frame: {s:.0} silhouette edges, {c:.0} of them change per frame\n"))
+        .collect::<String>();
     crate::emit(a.json, &out, &table);
     if mismatches > 0 {
         bail!("{mismatches} views where the tree and brute force disagree");
     }
     Ok(())
+}
+
+/// How much of the silhouette changes from frame to frame along an orbit at `degrees` per
+/// frame (2.5 bounding radii from the centre, the elevation swinging between 5 and 35
+/// degrees once every three turns; 60 frames): the median silhouette size and the median
+/// number of edges entering or leaving it per frame. What any reuse of an earlier frame's
+/// answer would have to keep up with.
+fn orbit_churn(mesh: &Mesh, tree: &EdgeTree, degrees: f32) -> (f32, f64, f64) {
+    let (lo, hi) = mesh.bounds;
+    let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+    let (mut sizes, mut changed) = (Vec::new(), Vec::new());
+    let mut prev: Vec<u32> = Vec::new();
+    for k in 0..60 {
+        let az = (k as f32 * degrees).to_radians();
+        let el = (20.0 + 15.0 * (az / 3.0).sin()).to_radians();
+        let eye = c + Vec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin()) * 2.5 * r;
+        let mut cur = Vec::new();
+        tree.silhouettes(eye, &mut cur);
+        cur.sort_unstable();
+        if k > 0 {
+            // Size of the symmetric difference of two sorted lists.
+            let (mut i, mut j, mut same) = (0, 0, 0);
+            while i < prev.len() && j < cur.len() {
+                match prev[i].cmp(&cur[j]) {
+                    std::cmp::Ordering::Equal => {
+                        same += 1;
+                        i += 1;
+                        j += 1;
+                    }
+                    std::cmp::Ordering::Less => i += 1,
+                    std::cmp::Ordering::Greater => j += 1,
+                }
+            }
+            changed.push((prev.len() + cur.len() - 2 * same) as f64);
+        }
+        sizes.push(cur.len() as f64);
+        prev = cur;
+    }
+    (degrees, median(&sizes), median(&changed))
 }
 
 fn load_scene(a: &EdgesArgs, what: &str, progress: &dyn Progress) -> Result<Scene> {

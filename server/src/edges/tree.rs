@@ -792,7 +792,7 @@ impl EdgeTree {
         let leaves = self.nodes.iter().filter(|n| n.is_leaf()).count();
         let stored_internal: usize = (0..self.nodes.len() as u32)
             .filter(|&i| !self.nodes[i as usize].is_leaf())
-            .map(|i| self.stored(i).len())
+            .map(|i| self.blocks[self.stored(i)].iter().map(|b| b.edges().count()).sum::<usize>())
             .sum();
         let mut depth = 0;
         let mut d = vec![0u32; self.nodes.len()];
@@ -920,6 +920,7 @@ pub struct TreeStats {
     pub edges: usize,
     pub nodes: usize,
     pub leaves: usize,
+    /// Edges stored at internal nodes ("sharp edges higher").
     pub stored_at_internal_nodes: usize,
     pub depth: usize,
     pub bytes: usize,
