@@ -386,6 +386,7 @@ fn scene_run(a: &EdgesArgs, what: String) -> Result<()> {
     let (mut shadow_static, mut shadow_move, mut shadow_move_cpu, mut sil, mut shadow_edges) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut cams = Vec::new();
+    let mut last_view = None;
     for f in 0..frames {
         // The camera orbits slowly about the scene's centre so silhouettes change.
         let cam = scene.camera.orbit((lo + hi) * 0.5, 0.01 * f as f32);
@@ -410,6 +411,7 @@ fn scene_run(a: &EdgesArgs, what: String) -> Result<()> {
         find.push(find_ms);
         find_cpu.push(fc);
         cams.push(cam.eye);
+        last_view = Some((cam.eye, view));
         if moved {
             shadow_move.push(shadow_ms);
             shadow_move_cpu.push(sc);
@@ -459,8 +461,7 @@ fn scene_run(a: &EdgesArgs, what: String) -> Result<()> {
     // A still camera over still objects (most frames of a converging session): each
     // object's edges of the previous frame are handed out again.
     let mut find_still = Vec::new();
-    if let Some(&eye) = cams.last() {
-        let view = ViewVolume::new(&scene.camera.orbit((lo + hi) * 0.5, 0.01 * (frames - 1) as f32), aspect);
+    if let Some((eye, view)) = last_view {
         finder.set_transforms(&t);
         for _ in 0..10 {
             out.clear();

@@ -173,6 +173,8 @@ impl SceneEdgeIndex {
 /// most frames of a session that converges). A moving eye queries the trees every frame:
 /// on the scanned dragon a third of the silhouette edges change between two frames of a
 /// one-degree orbit, so an older answer saves little there (README, *What is not done yet*).
+/// Keeping the answer costs a frame that queries one copy of its segments (the dragon's
+/// 31,000: about 1 MB, a few percent of the query).
 pub struct GeometricFinder {
     index: Arc<SceneEdgeIndex>,
     sharp: Vec<SharpTree>,
