@@ -205,6 +205,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 None => bail!("the session ended after {} frames", totals.len()),
                 Some(Err(e)) => return Err(e.into()),
                 Some(Ok(Event::Rejected(r))) => bail!("server rejected a message: {}", r.message),
+                Some(Ok(Event::Progress(_))) => {}
                 Some(Ok(Event::Frame(f))) => {
                     first_at.get_or_insert_with(Instant::now);
                     for s in &f.stages {

@@ -62,6 +62,9 @@ pub enum Event {
     Frame(pb::Frame),
     /// A later message of ours was ignored (e.g. a NaN camera); the session goes on.
     Rejected(pb::Rejected),
+    /// Progress of the session's long work (scene loading on the workers, edge trees, first
+    /// samples): show it instead of black frames.
+    Progress(pb::Progress),
 }
 
 /// A cloneable handle that sends messages into a session (e.g. from a window's key loop
@@ -193,6 +196,7 @@ impl SessionClient {
                 Ok(Some(m)) => match m.msg {
                     Some(server_msg::Msg::Frame(f)) => Some(Ok(Event::Frame(f))),
                     Some(server_msg::Msg::Rejected(r)) => Some(Ok(Event::Rejected(r))),
+                    Some(server_msg::Msg::Progress(p)) => Some(Ok(Event::Progress(p))),
                     Some(server_msg::Msg::Started(_)) => {
                         Some(Err(ClientError::Protocol("a second `started` in one session".into())))
                     }
@@ -211,6 +215,7 @@ fn msg_kind(m: &pb::ServerMsg) -> &'static str {
         Some(server_msg::Msg::Started(_)) => "started",
         Some(server_msg::Msg::Frame(_)) => "frame",
         Some(server_msg::Msg::Rejected(_)) => "rejected",
+        Some(server_msg::Msg::Progress(_)) => "progress",
         None => "an empty message",
     }
 }

@@ -366,6 +366,14 @@ fn send_step(sender: &SessionSender, step: ScriptStep) {
     }
 }
 
+fn log_progress(p: &pb::Progress) {
+    if p.total > 0 {
+        tracing::info!("{}: {}/{} {}", p.stage, p.done, p.total, p.message);
+    } else {
+        tracing::info!("{}: {}", p.stage, p.message);
+    }
+}
+
 fn log_rejected(r: &pb::Rejected) {
     let code = code_name(tonic::Code::from_i32(r.code));
     tracing::warn!("the server rejected a message: {code}: {}", r.message);
@@ -401,6 +409,7 @@ async fn run_headless(
             }
             Some(Err(e)) => return Err(e.into()),
             Some(Ok(Event::Rejected(r))) => log_rejected(&r),
+            Some(Ok(Event::Progress(p))) => log_progress(&p),
             Some(Ok(Event::Frame(f))) => {
                 writer.write_frame(&f, received)?;
                 if args.frames > 0 && writer.frames_written() >= args.frames {
@@ -441,6 +450,7 @@ fn run_window(
                 let received = Instant::now();
                 match ev? {
                     Event::Rejected(r) => log_rejected(&r),
+                    Event::Progress(p) => log_progress(&p),
                     Event::Frame(f) => {
                         let t0 = Instant::now();
                         let img = decode_frame(&f)?;
