@@ -7,6 +7,8 @@
 //!   filter) (no networking).
 //! - [`render_cache`] — paper 000 §4.3: cached 3D point samples, reprojection, depth-based
 //!   occlusion culling, gap-filling interpolation (no networking).
+//! - [`visibility`] — primary visibility: the scene's triangles rasterized at pixel centres,
+//!   the exact depth that culls hidden cached points in motion (no networking).
 //! - [`sampling`] — paper 000 §5.3 "Prioritized sampling": priorities from filter weight and
 //!   age, dithered selection of the frame's sample budget (no networking).
 //! - [`image_metrics`] — PSNR / SSIM against reference images.
@@ -34,4 +36,5 @@ pub mod scenes;
 pub mod service;
 pub mod session;
 pub mod stage_times;
+pub mod visibility;
 pub mod workers;

@@ -117,6 +117,9 @@ pub struct Hit {
     /// Distance along the ray in units of the ray direction's length.
     pub t: f32,
     pub position: Vec3,
+    /// The hit point in the object's own coordinates (from the object-space ray, so it lies
+    /// on the object's triangle up to the intersection's own rounding).
+    pub local: Vec3,
     /// Unit geometric normal (mesh winding), world space.
     pub normal: Vec3,
 }
@@ -159,7 +162,7 @@ impl Instances {
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let top = self.top.as_ref()?;
         let ray = make_ray(origin.into(), dir.into(), tmin, tmax);
-        let mut best: Option<(u32, u32)> = None;
+        let mut best: Option<(u32, u32, Vec3)> = None;
         let mut top_hit = RayHit::none();
         top.ray_traverse(ray, &mut top_hit, |r, slot| {
             let obj = self.slot_object[slot];
@@ -168,17 +171,17 @@ impl Instances {
             let local = make_ray(inv.transform_point3a(r.origin), inv.transform_vector3a(r.direction), r.tmin, r.tmax);
             let mut h = RayHit::none();
             if o.bvh.ray_traverse(local, &mut h, |lr, id| o.tris[id].intersect(lr)) {
-                best = Some((obj, h.primitive_id));
+                best = Some((obj, h.primitive_id, (local.origin + local.direction * h.t).into()));
                 h.t
             } else {
                 f32::INFINITY
             }
         });
-        let (object, slot) = best?;
+        let (object, slot, local) = best?;
         let t = top_hit.t;
         let o = &bvh.objects[object as usize];
         let normal = (self.normal_to_world[object as usize] * o.normals[slot as usize]).normalize_or_zero();
-        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, normal: normal.into() })
+        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, local, normal: normal.into() })
     }
 
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.

@@ -168,6 +168,7 @@ fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64)
                     distance: h.distance,
                     rgb: Some(s.rgb.into()),
                     triangle: h.triangle,
+                    local_position: Some(h.local_position.into()),
                 },
                 None => pb::Sample { id: s.id, hit: false, rgb: Some(s.rgb.into()), object_id: u32::MAX, ..Default::default() },
             })

@@ -85,6 +85,8 @@ pub struct RayRequest {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HitInfo {
     pub position: Vec3,
+    /// The hit in the object's own coordinates.
+    pub local_position: Vec3,
     /// Unit normal facing the incoming ray.
     pub normal: Vec3,
     pub object: u32,
@@ -226,7 +228,7 @@ fn shade_direct(
     if bad {
         rgb = Vec3::ZERO;
     }
-    let hit = HitInfo { position: h.position, normal: n, object: h.object, triangle: h.triangle, distance: h.t };
+    let hit = HitInfo { position: h.position, local_position: h.local, normal: n, object: h.object, triangle: h.triangle, distance: h.t };
     (SampleOut { id: r.id, hit: Some(hit), rgb }, triples, bad)
 }
 

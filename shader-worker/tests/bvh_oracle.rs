@@ -81,6 +81,10 @@ fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
                 }
                 let p = o + d * g.t;
                 assert!((g.position - p).length() < 1e-3 * r);
+                // The object-space hit is the same point: the object's transform takes it
+                // to the world hit.
+                let back = tf[g.object as usize].transform_point3(g.local);
+                assert!((back - g.position).length() < 1e-3 * r, "local {:?} -> {back:?} vs {:?}", g.local, g.position);
                 assert!((g.normal.length() - 1.0).abs() < 1e-3);
                 // occlusion agrees on the same segment
                 assert!(inst.occluded(&loaded.bvh, o, d, 0.0, g.t * 1.001).is_some());
