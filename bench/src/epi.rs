@@ -202,7 +202,7 @@ fn measure(
             scratch.clear();
             scene_edges(&staged.loaded.scene, transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut scratch);
         });
-        cache.reproject_points(cam, &mut t);
+        cache.reproject_points(cam, None, &mut t);
         counts = epi.build(edges, cam, cache.point_image(), true, &mut t);
         let (points, image, weights) = cache.reconstruction_target();
         epi.reconstruct(points, background, options, true, image, weights, &mut t);

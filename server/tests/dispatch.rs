@@ -113,6 +113,7 @@ impl ShaderWorker for ScriptedWorker {
                                 distance: 1.0,
                                 rgb: Some(Vec3::new(b.epoch as f32, t.len() as f32, x0).into()),
                                 triangle: 0,
+                                local_position: q.origin,
                             })
                             .collect();
                         let out = pb::SampleBatch { batch_id: b.batch_id, epoch: b.epoch, samples, shade_ms: 0.1, ..Default::default() };

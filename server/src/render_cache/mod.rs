@@ -45,13 +45,29 @@ pub const STALE_AGE: f32 = 1.0e9;
 /// fraction (Walter et al.'s relative depth test).
 pub const DEPTH_CULL_RELATIVE: f32 = 0.1;
 
+/// A point is hidden by the scene's surfaces when it lies farther than the farthest surface
+/// around its pixel by more than this fraction: far above the rounding of either depth
+/// (both come from the same triangles, in f32), far below any real gap between surfaces.
+pub const GEOMETRY_CULL_RELATIVE: f32 = 1e-3;
+
+/// The exact primary visibility of the frame (from `crate::visibility`), which reprojection
+/// culls against: every point hidden by a surface goes, wherever it reprojects, also where
+/// no neighbouring point could show it hidden; a background miss never lands on geometry.
+#[derive(Debug, Clone, Copy)]
+pub struct GeometryCull<'a> {
+    /// Per pixel: the farthest surface depth over its 3x3 neighbourhood (infinity where any
+    /// of those centres is uncovered).
+    pub far3: &'a [f32],
+    /// Per pixel: 1 / depth of the surface at the pixel centre, 0 where none covers it.
+    pub inverse_depth: &'a [f32],
+}
+
 /// One shaded point sample as the worker returned it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     pub hit: bool,
     /// World hit point; for a miss: the unit ray direction (a point at infinity).
     pub position: Vec3,
-    pub normal: Vec3,
     /// Linear RGB.
     pub color: Vec3,
     /// Object id, `u32::MAX` for a miss.
@@ -88,7 +104,8 @@ pub struct FrameCounts {
     pub filled: u32,
     /// Pixels no point reaches (background colour, filter weight 0).
     pub empty: u32,
-    /// Pixels whose nearest point was culled as occluded.
+    /// Pixels whose nearest point was culled as occluded (by its neighbours or by the
+    /// scene's surfaces).
     pub occluded: u32,
     /// Valid points in the cache.
     pub cache_points: u32,
@@ -132,7 +149,6 @@ impl PointImage {
 pub struct CachedPoint {
     pub hit: bool,
     pub position: Vec3,
-    pub normal: Vec3,
     pub color: Vec3,
     pub object: u32,
     pub epoch: u64,
@@ -184,7 +200,6 @@ struct Pool {
     px: Vec<f32>,
     py: Vec<f32>,
     pz: Vec<f32>,
-    normal: Vec<Vec3>,
     shade: Vec<Shade>,
     object: Vec<u32>,
     epoch: Vec<u64>,
@@ -250,7 +265,6 @@ impl RenderCache {
             px: vec![0.0; capacity],
             py: vec![0.0; capacity],
             pz: vec![0.0; capacity],
-            normal: vec![Vec3::ZERO; capacity],
             shade: vec![Shade::default(); capacity],
             object: vec![u32::MAX; capacity],
             epoch: vec![0; capacity],
@@ -304,20 +318,27 @@ impl RenderCache {
     /// nothing) for a sample with non-finite position or colour, a miss whose direction is
     /// zero, or a cache of capacity 0.
     pub fn insert(&mut self, s: &Sample) -> bool {
+        self.insert_aged(s, false)
+    }
+
+    /// [`Self::insert`], with the point given [`STALE_AGE`] when `stale`: its shading was
+    /// computed before a change that may have altered it (its object moved while it was
+    /// being shaded), so it shows until prioritized sampling re-shades it, first.
+    pub fn insert_aged(&mut self, s: &Sample, stale: bool) -> bool {
         if !s.position.is_finite() || !s.color.is_finite() || (!s.hit && s.position.length_squared() < 1e-12) {
             return false;
         }
         let band = (s.pixel[1] / BAND_ROWS).min(self.regions.len() as u32 - 1) as usize;
         let Some(slot) = self.take_slot(band) else { return false };
         let i = slot as usize;
+        let born = if stale { self.stale_born() } else { self.frame };
         let p = &mut self.pool;
         if p.flags[i] & FLAG_VALID == 0 {
             self.valid += 1;
         }
         let pos = if s.hit { s.position } else { s.position.normalize() };
         (p.px[i], p.py[i], p.pz[i]) = (pos.x, pos.y, pos.z);
-        p.normal[i] = if s.normal.is_finite() { s.normal } else { Vec3::ZERO };
-        p.shade[i] = Shade { color: s.color, born: self.frame };
+        p.shade[i] = Shade { color: s.color, born };
         p.object[i] = s.object;
         p.epoch[i] = s.epoch;
         p.pixel[i] = s.pixel;
@@ -418,10 +439,15 @@ impl RenderCache {
     /// light or a shadowing object moved), so prioritized sampling re-shades it first and
     /// replacement takes it before fresh points, but it stays visible until replaced.
     pub fn mark_stale(&mut self) {
-        let stale_born = self.frame.wrapping_sub(STALE_AGE as u32);
+        let stale_born = self.stale_born();
         for sh in self.pool.shade.iter_mut() {
             sh.born = stale_born;
         }
+    }
+
+    /// The birth frame that gives a point [`STALE_AGE`] now.
+    fn stale_born(&self) -> u32 {
+        self.frame.wrapping_sub(STALE_AGE as u32)
     }
 
     /// Age in frames of a point shaded at frame `born`.
@@ -470,7 +496,6 @@ impl RenderCache {
         Some(CachedPoint {
             hit: p.flags[i] & FLAG_HIT != 0,
             position: Vec3::new(p.px[i], p.py[i], p.pz[i]),
-            normal: p.normal[i],
             color: p.shade[i].color,
             object: p.object[i],
             epoch: p.epoch[i],
@@ -491,22 +516,58 @@ impl RenderCache {
         cam: &edgepoint_scene::camera::CameraFrame,
         times: &mut crate::stage_times::StageTimes,
     ) -> FrameCounts {
-        let occluded = self.reproject_points(cam, times);
+        let occluded = self.reproject_points(cam, None, times);
         let (with_point, filled, empty) = self.interpolate_gaps(times);
         FrameCounts { with_point, filled, empty, occluded, cache_points: self.valid as u32 }
     }
 
     /// The first half of [`Self::reproject_and_interpolate`]: ages the points and builds the
-    /// point image ([`STAGE_REPROJECT`]). Returns the number of points culled as occluded.
-    /// Another reconstruction (the edge-and-point image) can then fill the frame through
-    /// [`Self::reconstruction_target`].
-    pub fn reproject_points(&mut self, cam: &edgepoint_scene::camera::CameraFrame, times: &mut crate::stage_times::StageTimes) -> u32 {
+    /// point image ([`STAGE_REPROJECT`]), culling points hidden by their neighbours and, when
+    /// given, by the scene's surfaces (`geometry`, one entry per pixel). Returns the number of
+    /// pixels whose point was culled. Another reconstruction (the edge-and-point image) can
+    /// then fill the frame through [`Self::reconstruction_target`].
+    ///
+    /// Panics if `geometry` does not have one entry per pixel (a caller bug).
+    pub fn reproject_points(
+        &mut self,
+        cam: &edgepoint_scene::camera::CameraFrame,
+        geometry: Option<GeometryCull>,
+        times: &mut crate::stage_times::StageTimes,
+    ) -> u32 {
         let mut cam = *cam;
         cam.width = self.cfg.width;
         cam.height = self.cfg.height;
         cam.aspect = self.cfg.width as f32 / self.cfg.height.max(1) as f32;
+        if let Some(g) = &geometry {
+            let n = self.cfg.width as usize * self.cfg.height as usize;
+            assert!(g.far3.len() == n && g.inverse_depth.len() == n, "geometry cull images of the wrong size");
+        }
         self.frame = self.frame.wrapping_add(1);
-        times.time(STAGE_REPROJECT, || self.reproject(&cam))
+        times.time(STAGE_REPROJECT, || self.reproject(&cam, geometry))
+    }
+
+    /// Carries the points on `object` along when it moves from transform `from` to `to`
+    /// (DESIGN.md "Motion": a cached point keeps its place on its object), and ages them to
+    /// [`STALE_AGE`]: their shading was computed in the old place, so prioritized sampling
+    /// re-shades them first, but they keep showing the object meanwhile. Returns the number
+    /// of points moved.
+    pub fn move_object(&mut self, object: u32, from: &glam::Affine3A, to: &glam::Affine3A) -> u32 {
+        // The change of place, composed in f64 so that a long series of moves does not drift.
+        let d = glam::DAffine3::from_cols_array(&to.to_cols_array().map(f64::from))
+            * glam::DAffine3::from_cols_array(&from.to_cols_array().map(f64::from)).inverse();
+        let d = glam::Affine3A::from_cols_array(&d.to_cols_array().map(|v| v as f32));
+        let stale_born = self.stale_born();
+        let p = &mut self.pool;
+        let mut moved = 0;
+        for i in 0..self.capacity {
+            if p.object[i] == object && p.flags[i] & (FLAG_VALID | FLAG_HIT) == FLAG_VALID | FLAG_HIT {
+                let w = d.transform_point3(Vec3::new(p.px[i], p.py[i], p.pz[i]));
+                (p.px[i], p.py[i], p.pz[i]) = (w.x, w.y, w.z);
+                p.shade[i].born = stale_born;
+                moved += 1;
+            }
+        }
+        moved
     }
 
     /// The Render Cache's own gap-filling interpolation of the last reprojection

@@ -5,7 +5,7 @@
 //! rows merges them. A depth-buffer entry is `(depth bits << 32) | point index`, the
 //! minimum wins: positive `f32` bit patterns order like the floats, a point at infinity (a
 //! miss) is behind every hit, and equal depths go to the lower index.
-use super::{Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_VALID, NO_POINT};
+use super::{GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_VALID, GEOMETRY_CULL_RELATIVE, NO_POINT};
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -111,7 +111,7 @@ impl RenderCache {
     /// Projects every point, keeps the nearest per pixel, culls occluded ones and builds the
     /// point image. Returns the number of pixels whose point was culled. Which points lost
     /// their pixel is left in the depth buffer (`zbufs[0]`) and `proj` for replacement to read.
-    pub(super) fn reproject(&mut self, cam: &CameraFrame) -> u32 {
+    pub(super) fn reproject(&mut self, cam: &CameraFrame, geometry: Option<GeometryCull>) -> u32 {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
         let pixels = w * h;
         if pixels == 0 {
@@ -152,6 +152,7 @@ impl RenderCache {
             frame: self.frame,
             w,
             h,
+            geometry,
         };
         let pi = &mut self.points;
         (
@@ -252,6 +253,7 @@ struct RowContext<'a> {
     frame: u32,
     w: usize,
     h: usize,
+    geometry: Option<GeometryCull<'a>>,
 }
 
 /// Pass 2 for row `y`: culls occluded points and writes the row of the point image. Returns
@@ -274,6 +276,16 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
             continue;
         }
         let dc = key_depth(key);
+        if let Some(g) = &c.geometry {
+            let i = y * w + x;
+            // Behind every surface around the pixel, or a background miss on a surface:
+            // hidden, whatever the neighbouring points say.
+            let hidden = if dc < f32::INFINITY { dc > g.far3[i] * (1.0 + GEOMETRY_CULL_RELATIVE) } else { g.inverse_depth[i] > 0.0 };
+            if hidden {
+                culled += 1;
+                continue;
+            }
+        }
         // Cheap pre-test: without any neighbour nearer by the threshold the point cannot be
         // occluded (most pixels stop here).
         let nearest = f32::from_bits(m_above[x].min(m_here[x]).min(m_below[x]));

@@ -8,11 +8,11 @@ use edgepoint_scene::camera::{Camera, CameraFrame};
 use crate::rng::Rng;
 
 fn hit(position: Vec3, color: Vec3, object: u32) -> Sample {
-    Sample { hit: true, position, normal: Vec3::Y, color, object, epoch: 1, pixel: [0, 0] }
+    Sample { hit: true, position, color, object, epoch: 1, pixel: [0, 0] }
 }
 
 fn miss(direction: Vec3, color: Vec3) -> Sample {
-    Sample { hit: false, position: direction.normalize(), normal: Vec3::ZERO, color, object: u32::MAX, epoch: 1, pixel: [0, 0] }
+    Sample { hit: false, position: direction.normalize(), color, object: u32::MAX, epoch: 1, pixel: [0, 0] }
 }
 
 /// The sample with the pixel it was shaded for.

@@ -27,6 +27,7 @@ use crate::render_cache::holes::HoleFill;
 use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
+use crate::visibility::{Visibility, STAGE_VISIBILITY};
 use crate::workers::Dispatcher;
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
@@ -64,8 +65,10 @@ pub struct SessionCounters {
     pub frames: u64,
     pub samples_inserted: u64,
     pub samples_requested: u64,
-    /// Samples of an object that moved after the sample's epoch (or misses from before the
-    /// last move), never shown.
+    /// Samples of an object that moved after the sample's epoch: carried to the object's
+    /// current place (from the hit's object-space position) and inserted as stale.
+    pub carried: u64,
+    /// Hits without an object-space position whose object moved since (not inserted).
     pub stale_dropped: u64,
     /// Answers whose request the session no longer remembers, or with an unknown object.
     pub unmatched: u64,
@@ -93,6 +96,8 @@ pub(super) struct FrameLoop {
     /// Per object: its current object-to-world transform (for edge finding).
     transforms: Vec<glam::Affine3A>,
     cache: RenderCache,
+    /// The exact primary visibility of the frame: what reprojection culls against.
+    visibility: Visibility,
     epi: Epi,
     /// Finds the frame's discontinuity segments (edge trees, shadow thread).
     edge_source: SessionEdges,
@@ -147,6 +152,7 @@ impl FrameLoop {
             last_move_epoch: 0,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             cache,
+            visibility: Visibility::new(p.width, p.height),
             epi: Epi::new(p.width, p.height),
             edge_source: SessionEdges::new(
                 p.scene.clone(),
@@ -262,7 +268,10 @@ impl FrameLoop {
             );
             self.times.add(STAGE_EDGES, ms_since(t));
         }
-        let occluded = self.cache.reproject_points(&self.cam_frame, &mut self.times);
+        let t = Instant::now();
+        self.visibility.update(&self.scene, &self.transforms, &self.cam_frame);
+        self.times.add(STAGE_VISIBILITY, ms_since(t));
+        let occluded = self.cache.reproject_points(&self.cam_frame, Some(self.visibility.cull()), &mut self.times);
         let epi_counts = build.then(|| {
             let centre_lines = epr && s.complex_filter;
             self.epi.build(&self.edges, &self.cam_frame, self.cache.point_image(), centre_lines, &mut self.times)
@@ -390,11 +399,12 @@ impl FrameLoop {
             tracing::error!(epoch = self.epoch, "dispatcher refused a new epoch");
         }
         self.moved_at[id as usize] = self.epoch;
-        self.transforms[id as usize] = t;
+        let from = std::mem::replace(&mut self.transforms[id as usize], t);
         self.last_move_epoch = self.epoch;
-        self.cache.invalidate_objects(&[id]);
-        // Shadows and reflections on other objects may have changed too: age everything so
-        // it is re-sampled soon (DESIGN.md step 1, conservatively).
+        // The object's points go with it (their shading is aged: it was computed in the old
+        // place). Shadows and reflections on other objects may have changed too: age
+        // everything so it is re-sampled soon (DESIGN.md step 1, conservatively).
+        self.cache.move_object(id, &from, &t);
         self.cache.mark_stale();
     }
 
@@ -412,40 +422,45 @@ impl FrameLoop {
                     self.counters.unmatched += 1;
                     continue;
                 };
-                let (position, object) = if s.hit {
-                    if s.object_id >= objects {
+                let mut position = pb::vec3_or_zero(&s.position);
+                let mut stale = false;
+                let object = if s.hit {
+                    let o = s.object_id;
+                    if o >= objects {
                         self.counters.unmatched += 1;
                         continue;
                     }
-                    // A sample of an object that has moved since it was requested shows the
-                    // object where it no longer is: never show it.
-                    if self.moved_at[s.object_id as usize] > b.epoch {
-                        self.counters.stale_dropped += 1;
-                        continue;
+                    // The object moved after the sample was requested: the hit is carried to
+                    // the object's current place (DESIGN.md "Motion"), its shading aged.
+                    if self.moved_at[o as usize] > b.epoch {
+                        if s.local_position.is_none() {
+                            self.counters.stale_dropped += 1;
+                            continue;
+                        }
+                        position = self.transforms[o as usize].transform_point3(pb::vec3_or_zero(&s.local_position));
+                        stale = true;
+                        self.counters.carried += 1;
                     }
-                    (pb::vec3_or_zero(&s.position), s.object_id)
+                    o
                 } else {
-                    // A miss from before the last move may now be blocked by the moved object.
-                    if b.epoch < self.last_move_epoch {
-                        self.counters.stale_dropped += 1;
-                        continue;
-                    }
-                    (info.dir, u32::MAX)
+                    // A background miss is a direction (DESIGN.md "Motion"); reprojection
+                    // culls it wherever the scene's surfaces cover its pixel.
+                    position = info.dir;
+                    u32::MAX
                 };
                 let sample = Sample {
                     hit: s.hit,
                     position,
-                    normal: pb::vec3_or_zero(&s.normal),
                     color: pb::vec3_or_zero(&s.rgb),
                     object,
                     epoch: b.epoch,
                     pixel: info.pixel,
                 };
-                if !(sample.position.is_finite() && sample.normal.is_finite() && sample.color.is_finite()) {
+                if !(sample.position.is_finite() && sample.color.is_finite()) {
                     self.counters.nonfinite += 1;
                     continue;
                 }
-                if self.cache.insert(&sample) {
+                if self.cache.insert_aged(&sample, stale) {
                     inserted += 1;
                 }
             }

@@ -109,7 +109,7 @@ impl Session {
             fl.run();
             let c = fl.counters;
             tracing::info!(session = %id, frames = c.frames, samples_inserted = c.samples_inserted,
-                samples_requested = c.samples_requested, stale_dropped = c.stale_dropped,
+                samples_requested = c.samples_requested, carried = c.carried, stale_dropped = c.stale_dropped,
                 unmatched = c.unmatched, nonfinite = c.nonfinite, refused_batches = c.refused_batches,
                 triples = fl.feedback.triples.len(), "session ended");
             drop(fl);

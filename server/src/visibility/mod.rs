@@ -156,6 +156,11 @@ impl Visibility {
         self.invz[i] > 0.0
     }
 
+    /// What the Render Cache's reprojection culls against.
+    pub fn cull(&self) -> crate::render_cache::GeometryCull<'_> {
+        crate::render_cache::GeometryCull { far3: &self.far3, inverse_depth: &self.invz }
+    }
+
     /// Per pixel, the farthest surface depth over its 3x3 neighbourhood (`INFINITY` where
     /// any of those pixel centres is uncovered). A point is certainly hidden when it lies
     /// beyond this depth: every pixel centre around it shows a nearer surface.
