@@ -55,6 +55,10 @@ pub struct SceneArgs {
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
     #[arg(long, default_value = "target/edgepoint-refs")]
     pub ref_cache: PathBuf,
+    /// Camera overriding the scene's, any subset of "eye=X,Y,Z target=X,Y,Z up=X,Y,Z
+    /// fov=DEG" (the viewer's --camera).
+    #[arg(long, value_name = "KEYS", value_parser = edgepoint_viewer::camera_path::parse_camera_spec)]
+    pub camera: Option<edgepoint_viewer::CameraSpec>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -178,7 +182,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 args.reconstruction.apply(&mut s);
                 s
             }),
-            camera: None,
+            camera: a.camera.map(|c| c.to_wire()),
         };
         let t0 = Instant::now();
         let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
@@ -205,7 +209,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 None => bail!("the session ended after {} frames", totals.len()),
                 Some(Err(e)) => return Err(e.into()),
                 Some(Ok(Event::Rejected(r))) => bail!("server rejected a message: {}", r.message),
-                Some(Ok(Event::Progress(_))) => {}
+                Some(Ok(Event::Progress(_) | Event::Picked(_))) => {}
                 Some(Ok(Event::Frame(f))) => {
                     first_at.get_or_insert_with(Instant::now);
                     for s in &f.stages {
@@ -348,7 +352,11 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
     let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
-        let refs = references(&cluster, a, &source, &scene.camera).await?;
+        let camera = match a.camera {
+            Some(c) => c.apply(&scene.camera).map_err(|e| anyhow::anyhow!("--camera: {e}"))?,
+            None => scene.camera,
+        };
+        let refs = references(&cluster, a, &source, &camera).await?;
         std::fs::create_dir_all(&args.out)?;
         let conv = args.out.join(format!("reference_{}spp.png", a.reference_spp));
         let one = args.out.join("reference_1spp.png");

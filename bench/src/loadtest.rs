@@ -71,6 +71,10 @@ pub struct LoadtestArgs {
     /// Frame-rate cap of every session (the server's default is 30).
     #[arg(long, default_value_t = 30.0)]
     pub max_fps: f64,
+    /// Camera of every session, overriding the scene's: any subset of "eye=X,Y,Z
+    /// target=X,Y,Z up=X,Y,Z fov=DEG" (the viewer's --camera).
+    #[arg(long, value_name = "KEYS", value_parser = edgepoint_viewer::camera_path::parse_camera_spec)]
+    pub camera: Option<edgepoint_viewer::CameraSpec>,
     /// Seconds of each failover window (before, after the kill, after the restart, while
     /// stopped, after continuing).
     #[arg(long, default_value_t = 4.0)]
@@ -202,7 +206,7 @@ fn session_start(a: &LoadtestArgs, source: &pb::SceneSource) -> pb::Start {
         shader_params: a.shader_params.iter().cloned().collect(),
         encoding: pb::FrameEncoding::Qoi as i32,
         settings: Some(pb::Settings { max_fps: a.max_fps, ..Default::default() }),
-        camera: None,
+        camera: a.camera.map(|c| c.to_wire()),
     }
 }
 

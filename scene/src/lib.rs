@@ -17,6 +17,7 @@ pub mod light;
 pub mod load;
 pub mod material;
 pub mod mesh;
+pub mod orbit;
 pub mod progress;
 mod scene;
 
@@ -25,6 +26,7 @@ pub use error::SceneError;
 pub use light::Light;
 pub use material::Material;
 pub use mesh::{Edge, Mesh, WeldStats, NO_FACE};
+pub use orbit::Orbit;
 pub use progress::{NoProgress, Progress};
 pub use scene::{Object, Scene};
 

@@ -1,5 +1,5 @@
 //! The scene: objects (mesh + material + transform), lights, camera, ambient term.
-use crate::{Camera, Light, Material, Mesh};
+use crate::{Camera, Light, Material, Mesh, Orbit};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
 
@@ -23,6 +23,10 @@ pub struct Scene {
     pub ambient: Vec3,
     /// Radiance of rays that hit nothing.
     pub background: Vec3,
+    /// The orbit the scene suggests for a moving camera (built-ins: inside the room and
+    /// outside every object all the way round; loaded models: about the framing target).
+    /// `None` falls back to the orbit through the camera ([`Scene::suggested_orbit`]).
+    pub orbit: Option<Orbit>,
 }
 
 impl Scene {
@@ -36,22 +40,38 @@ impl Scene {
         self.objects.iter().position(|o| o.name == name).map(|i| i as u32)
     }
 
+    /// The scene's suggested orbit, or the orbit through its camera when it names none.
+    pub fn suggested_orbit(&self) -> Orbit {
+        self.orbit.unwrap_or_else(|| Orbit::through(&self.camera))
+    }
+
+    /// World-space bounding box of object `i` at its default transform.
+    pub fn object_bounds(&self, i: usize) -> (Vec3, Vec3) {
+        let o = &self.objects[i];
+        let (a, b) = o.mesh.bounds;
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for c in 0..8 {
+            let p = Vec3::new(
+                if c & 1 == 0 { a.x } else { b.x },
+                if c & 2 == 0 { a.y } else { b.y },
+                if c & 4 == 0 { a.z } else { b.z },
+            );
+            let w = o.transform.transform_point3(p);
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+        (lo, hi)
+    }
+
     /// World-space bounding box of all objects at their default transforms.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for o in &self.objects {
-            let (a, b) = o.mesh.bounds;
-            for i in 0..8 {
-                let c = Vec3::new(
-                    if i & 1 == 0 { a.x } else { b.x },
-                    if i & 2 == 0 { a.y } else { b.y },
-                    if i & 4 == 0 { a.z } else { b.z },
-                );
-                let w = o.transform.transform_point3(c);
-                lo = lo.min(w);
-                hi = hi.max(w);
-            }
+        for i in 0..self.objects.len() {
+            let (a, b) = self.object_bounds(i);
+            lo = lo.min(a);
+            hi = hi.max(b);
         }
         if lo.x > hi.x {
             (Vec3::ZERO, Vec3::ZERO)
@@ -73,6 +93,9 @@ impl Scene {
             if !o.transform.is_finite() {
                 return Err(format!("object {}: transform is not finite", o.name));
             }
+        }
+        if let Some(o) = &self.orbit {
+            o.validate()?;
         }
         self.camera.validate()
     }

@@ -16,7 +16,7 @@
 use crate::metrics::{Refusal, SessionMetrics};
 use crate::reference::LogProgress;
 use crate::rng::mix64;
-use crate::session::{camera_from_wire, camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
+use crate::session::{camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
 use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
 use edgepoint_proto::auth::{constant_time_eq, parse_bearer, AUTHORIZATION};
@@ -235,7 +235,7 @@ fn check_start(s: &pb::Start) -> Result<StartChecked, Status> {
         None => SessionSettings::default(),
     };
     if let Some(c) = &s.camera {
-        camera_from_wire(c).map_err(|e| invalid(format!("start.camera: {e}")))?;
+        pb::check_partial_camera(c).map_err(|e| invalid(format!("start.camera: {e}")))?;
     }
     if s.scene.is_none() {
         return Err(invalid("start.scene is missing: name a built-in or send files"));
@@ -268,6 +268,7 @@ fn started_msg(id: &str, hash: &str, scene: &edgepoint_scene::Scene, camera: &ed
             scene_min: Some(lo.into()),
             scene_max: Some(hi.into()),
             lights: scene.lights.len() as u32,
+            orbit: Some(pb::orbit_to_wire(&scene.suggested_orbit())),
         })),
     }
 }
@@ -307,6 +308,7 @@ impl RendererService {
                     Some(ViewerIn::Camera(_)) => "camera",
                     Some(ViewerIn::Move(_)) => "move",
                     Some(ViewerIn::Settings(_)) => "settings",
+                    Some(ViewerIn::Pick(_)) => "pick",
                     _ => "an empty message",
                 };
                 return Err(invalid(format!("the first message must be `start`, got {what}")));
@@ -344,7 +346,7 @@ impl RendererService {
         };
         let scene = shared.scene;
         let camera = match &start.camera {
-            Some(c) => camera_from_wire(c).map_err(|e| invalid(format!("start.camera: {e}")))?,
+            Some(c) => pb::camera_over(c, &scene.camera).map_err(|e| invalid(format!("start.camera: {e}")))?,
             None => scene.camera,
         };
 
@@ -396,6 +398,7 @@ impl RendererService {
                             Some(ViewerIn::Camera(c)) => Input::Camera(c),
                             Some(ViewerIn::Move(m)) => Input::Move(m),
                             Some(ViewerIn::Settings(s)) => Input::Settings(s),
+                            Some(ViewerIn::Pick(p)) => Input::Pick(p),
                             Some(ViewerIn::Start(_)) => {
                                 out_in.reject(tonic::Code::InvalidArgument, "`start` ignored: the session is already started");
                                 continue;
@@ -495,8 +498,12 @@ mod tests {
         assert!(e.message().contains("height") && e.message().contains("9000"));
         assert!(check_start(&pb::Start { encoding: 42, ..start() }).unwrap_err().message().contains("42"));
         assert!(check_start(&pb::Start { scene: None, ..start() }).unwrap_err().message().contains("scene"));
-        let bad_cam = pb::Camera { fov_y_degrees: 40.0, ..Default::default() };
-        assert!(check_start(&pb::Start { camera: Some(bad_cam), ..start() }).unwrap_err().message().contains("camera"));
+        // A partial camera is fine (the scene's fills the rest); a bad field is named.
+        let fov_only = pb::Camera { fov_y_degrees: 40.0, ..Default::default() };
+        assert!(check_start(&pb::Start { camera: Some(fov_only), ..start() }).is_ok());
+        let bad_cam = pb::Camera { eye: Some(glam::Vec3::new(0.0, f32::INFINITY, 0.0).into()), ..Default::default() };
+        let e = check_start(&pb::Start { camera: Some(bad_cam), ..start() }).unwrap_err();
+        assert!(e.message().contains("start.camera: camera eye is not finite"), "{}", e.message());
         let bad_settings = pb::Settings { sparseness: -2.0, ..Default::default() };
         assert!(check_start(&pb::Start { settings: Some(bad_settings), ..start() }).unwrap_err().message().contains("sparseness"));
         let params = HashMap::from([("ambient".to_string(), f64::NAN)]);

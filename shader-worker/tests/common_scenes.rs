@@ -48,5 +48,6 @@ pub fn scene(objects: Vec<Object>, lights: Vec<Light>, ambient: f32) -> Scene {
         camera: Camera { eye: Vec3::new(0.0, 3.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 45.0 },
         ambient: Vec3::splat(ambient),
         background: Vec3::new(0.1, 0.2, 0.3),
+        orbit: None,
     }
 }

@@ -49,7 +49,7 @@ pub async fn next_frame(client: &mut SessionClient, timeout: Duration) -> Result
             Ok(Some(Err(e))) => return Err(e).context("session failed"),
             Ok(Some(Ok(Event::Frame(f)))) => return Ok((f, rejected)),
             Ok(Some(Ok(Event::Rejected(r)))) => rejected.push(r),
-            Ok(Some(Ok(Event::Progress(_)))) => {}
+            Ok(Some(Ok(Event::Progress(_) | Event::Picked(_)))) => {}
         }
     }
 }

@@ -65,6 +65,8 @@ pub enum Event {
     /// Progress of the session's long work (scene loading on the workers, edge trees, first
     /// samples): show it instead of black frames.
     Progress(pb::Progress),
+    /// The answer to a `pick`: the object under a pixel.
+    Picked(pb::Picked),
 }
 
 /// A cloneable handle that sends messages into a session (e.g. from a window's key loop
@@ -93,6 +95,12 @@ impl SessionSender {
     /// Changes session settings (zero fields keep their value).
     pub fn send_settings(&self, settings: pb::Settings) -> Result<(), ClientError> {
         self.send(viewer_msg::Msg::Settings(settings))
+    }
+
+    /// Asks which object is under frame position (`x`, `y`); answered by an
+    /// [`Event::Picked`] with the same `id`.
+    pub fn send_pick(&self, id: u64, x: f32, y: f32) -> Result<(), ClientError> {
+        self.send(viewer_msg::Msg::Pick(pb::Pick { id, x, y }))
     }
 }
 
@@ -197,6 +205,7 @@ impl SessionClient {
                     Some(server_msg::Msg::Frame(f)) => Some(Ok(Event::Frame(f))),
                     Some(server_msg::Msg::Rejected(r)) => Some(Ok(Event::Rejected(r))),
                     Some(server_msg::Msg::Progress(p)) => Some(Ok(Event::Progress(p))),
+                    Some(server_msg::Msg::Picked(p)) => Some(Ok(Event::Picked(p))),
                     Some(server_msg::Msg::Started(_)) => {
                         Some(Err(ClientError::Protocol("a second `started` in one session".into())))
                     }
@@ -216,6 +225,7 @@ fn msg_kind(m: &pb::ServerMsg) -> &'static str {
         Some(server_msg::Msg::Frame(_)) => "frame",
         Some(server_msg::Msg::Rejected(_)) => "rejected",
         Some(server_msg::Msg::Progress(_)) => "progress",
+        Some(server_msg::Msg::Picked(_)) => "picked",
         None => "an empty message",
     }
 }

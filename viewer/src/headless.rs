@@ -46,6 +46,11 @@ pub struct FrameStats {
     pub edges: EdgeStats,
     /// How the frame was reconstructed: `epr` or `render-cache`.
     pub reconstruction: &'static str,
+    /// The overlay drawn over it (`none`, `edges`, `classes`, `samples`).
+    pub overlay: &'static str,
+    /// The camera the server rendered it with, as a camera path line's fields.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraStats>,
     pub epoch: u64,
     pub live_workers: u32,
     pub frames_dropped: u64,
@@ -60,6 +65,22 @@ pub struct FrameStats {
     pub fps: f64,
     /// Time the viewer spent decoding the frame.
     pub decode_ms: f64,
+}
+
+/// A frame's camera in stats lines (the fields of a camera path line).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct CameraStats {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: [f32; 3],
+    pub fov: f32,
+}
+
+impl From<&pb::Camera> for CameraStats {
+    fn from(c: &pb::Camera) -> Self {
+        let c = crate::client::camera_from_wire(c);
+        CameraStats { eye: c.eye.into(), target: c.target.into(), up: c.up.into(), fov: c.fov_y_degrees }
+    }
 }
 
 /// Stage timings that serialize as a JSON object keeping pipeline order.
@@ -225,6 +246,8 @@ impl FrameStats {
             pixels: f.pixels.as_ref().map(PixelStats::from).unwrap_or_default(),
             edges: f.edges.as_ref().map(EdgeStats::from).unwrap_or_default(),
             reconstruction: crate::reconstruction::reconstruction_name(f.reconstruction),
+            overlay: crate::reconstruction::overlay_name(f.overlay),
+            camera: f.camera.as_ref().map(CameraStats::from),
             epoch: f.epoch,
             live_workers: f.live_workers,
             frames_dropped: f.frames_dropped,

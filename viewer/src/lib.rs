@@ -8,8 +8,12 @@
 //! - [`frame`]: decoding frames (raw / QOI / PNG / JPEG) into RGB images.
 //! - [`headless`]: PNG per frame plus one JSON line of stats per frame.
 //! - [`reconstruction`]: the reconstruction switches (edge-and-point vs baseline, overlays).
-//! - [`script`]: scripted camera orbit and object slide; the camera rig keys drive.
+//! - [`camera_path`]: `--camera`, camera path files (read, write), `--orbit` parameters.
+//! - [`camera_control`]: the camera the window's mouse and keys move.
+//! - [`script`]: scripted camera orbit or path and object slide, one step per frame.
 //! - [`window`]: an on-screen window (minifb) when a display exists.
+pub mod camera_control;
+pub mod camera_path;
 pub mod client;
 pub mod frame;
 pub mod headless;
@@ -22,4 +26,5 @@ pub use client::{scene_source_from_arg, scene_source_from_arg_in, ClientError, C
 pub use headless::{FrameStats, HeadlessWriter};
 pub use local::{find_binary, LocalCluster, LocalOptions};
 pub use reconstruction::ReconstructionArgs;
-pub use script::{CameraRig, ObjectSlide, Script};
+pub use camera_path::{CameraSpec, OrbitArgs};
+pub use script::{CameraPlan, ObjectSlide, Script};

@@ -4,11 +4,13 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, ValueEnum};
 use edgepoint_proto::{self as pb, FrameEncoding};
-use edgepoint_viewer::client::{camera_to_wire, code_name, SessionSender};
+use edgepoint_viewer::client::{camera_from_wire, camera_to_wire, code_name, SessionSender};
 use edgepoint_viewer::frame::{decode_frame, to_0rgb};
 use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
-use edgepoint_viewer::script::{Script, ScriptStep};
+use edgepoint_viewer::camera_path::{parse_camera_spec, read_path, CameraSpec, OrbitArgs, PathWriter};
+use edgepoint_viewer::script::{CameraPlan, Script, ScriptStep};
+use edgepoint_viewer::camera_control::{FreeCamera, DOLLY_PER_NOTCH};
 use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
 use edgepoint_viewer::{scene_source_from_arg_in, ConnectOptions, Event, ReconstructionArgs, SessionClient};
 use std::io::IsTerminal;
@@ -133,13 +135,32 @@ struct Args {
     #[arg(long)]
     headless: bool,
 
-    /// Orbit the camera about the vertical axis through its target, one step per frame.
-    #[arg(long)]
-    orbit: bool,
+    /// Camera overriding the scene's, any subset of "eye=X,Y,Z target=X,Y,Z up=X,Y,Z
+    /// fov=DEG" (sent in `start`; the keys left out keep the scene camera's). With --orbit
+    /// only fov is allowed (the orbit places the camera).
+    #[arg(long, value_name = "KEYS", value_parser = parse_camera_spec)]
+    camera: Option<CameraSpec>,
 
-    /// Orbit step in degrees per received frame (with --orbit; negative turns the other way).
-    #[arg(long, value_name = "DEGREES", default_value_t = 1.0, allow_negative_numbers = true, value_parser = parse_finite_f32)]
-    orbit_speed: f32,
+    #[command(flatten)]
+    orbit: OrbitArgs,
+
+    /// Play a camera path: FILE holds one camera per line as JSON,
+    /// {"eye":[x,y,z],"target":[x,y,z],"up":[x,y,z],"fov":deg} (any subset of the keys, over
+    /// the start camera; blank lines and # comments skipped). One camera per received frame;
+    /// at the end of the path a headless run stops once a frame of the last camera arrives
+    /// (--frames may stop it sooner) and a window keeps the last camera for the mouse and
+    /// keys, unless --loop-path starts it over.
+    #[arg(long, value_name = "FILE", conflicts_with = "orbit")]
+    camera_path: Option<PathBuf>,
+
+    /// Start the --camera-path over at its end, forever.
+    #[arg(long, requires = "camera_path")]
+    loop_path: bool,
+
+    /// Record the camera of every received frame (as the server reports it rendered the
+    /// frame) to FILE, one JSON line per frame, in the format --camera-path plays.
+    #[arg(long, value_name = "FILE")]
+    record_path: Option<PathBuf>,
 
     /// Slide the named scene object back and forth along X (25% of the scene's width,
     /// 120 frames per cycle), one move per received frame.
@@ -206,14 +227,6 @@ fn parse_positive_f64(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-fn parse_finite_f32(s: &str) -> Result<f32, String> {
-    let v: f32 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if !v.is_finite() {
-        return Err(format!("must be a finite number, got {s}"));
-    }
-    Ok(v)
-}
-
 fn main() -> ExitCode {
     let args = Args::parse();
     tracing_subscriber::fmt()
@@ -236,8 +249,10 @@ fn main() -> ExitCode {
 /// Everything that owns resources lives in here, so the local cluster is dropped (its
 /// children killed) before the process exits, whatever the outcome.
 fn run(args: Args) -> Result<()> {
-    // Read the scene before starting anything: a wrong path fails at once.
+    // Read the scene and the camera path before starting anything: a wrong path fails at once.
     let scene = scene_source_from_arg_in(&args.scene, args.data_dir.as_deref())?;
+    let plan = camera_plan(&args)?;
+    let mut recorder = args.record_path.as_deref().map(PathWriter::create).transpose()?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -297,7 +312,7 @@ fn run(args: Args) -> Result<()> {
         shader_params: args.shader_param.iter().cloned().collect(),
         encoding: FrameEncoding::from(args.encoding) as i32,
         settings,
-        camera: None,
+        camera: args.camera.map(|c| c.to_wire()),
     };
     let token = match (&args.token, &args.token_file) {
         (Some(t), _) => Some(t.trim().to_string()),
@@ -330,7 +345,9 @@ fn run(args: Args) -> Result<()> {
         objects = %names.join(", "),
         "session started"
     );
-    let script = Script::new(&started, args.orbit.then_some(args.orbit_speed), args.move_object.as_deref())?;
+    let mut script = Script::new(&started, &plan, args.move_object.as_deref())?;
+    // The scripted camera's first position goes out before any frame is taken.
+    send_step(&client.sender(), script.first_step());
 
     let want_window = !args.headless && display_available();
     let window = if want_window {
@@ -345,14 +362,38 @@ fn run(args: Args) -> Result<()> {
         None
     };
     let result = match window {
-        Some(w) => run_window(&rt, w, client, script, &args, stop_flag),
+        Some(w) => run_window(&rt, w, client, script, recorder, &args, stop_flag),
         None => {
             let out = args.out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUT_DIR));
-            rt.block_on(run_headless(client, script, &args, out, stop_rx))
+            rt.block_on(run_headless(client, script, &mut recorder, &args, out, stop_rx))
         }
     };
     drop(cluster);
     result
+}
+
+/// What the camera flags ask for. `--orbit` with a --camera that places the camera is an
+/// error (the orbit places it); the path file is read here, so its errors come first.
+fn camera_plan(args: &Args) -> Result<CameraPlan> {
+    let fov = args.camera.and_then(|c| c.fov_y_degrees);
+    if args.orbit.orbit {
+        if args.camera.is_some_and(|c| c.places_the_camera()) {
+            bail!("--camera eye/target/up cannot be combined with --orbit (the orbit places the camera: use --orbit-pivot, --orbit-radius, --orbit-elevation, --orbit-start; --camera fov=DEG sets its lens)");
+        }
+        return Ok(CameraPlan::Orbit { args: args.orbit.clone(), fov });
+    }
+    if let Some(p) = &args.camera_path {
+        return Ok(CameraPlan::Path { entries: read_path(p)?, name: p.display().to_string(), looped: args.loop_path });
+    }
+    Ok(CameraPlan::Still)
+}
+
+/// Appends the camera frame `f` was rendered with to the recorded path.
+fn record(recorder: &mut Option<PathWriter>, f: &pb::Frame) -> Result<()> {
+    if let (Some(w), Some(c)) = (recorder.as_mut(), f.camera.as_ref()) {
+        w.push(&camera_from_wire(c))?;
+    }
+    Ok(())
 }
 
 /// Sends what the script asks for after a frame; a send can only fail once the session is
@@ -389,6 +430,7 @@ fn session_ended_early(count: u64, target: u64) -> Result<()> {
 async fn run_headless(
     mut client: SessionClient,
     mut script: Script,
+    recorder: &mut Option<PathWriter>,
     args: &Args,
     out: PathBuf,
     mut stop: watch::Receiver<bool>,
@@ -410,9 +452,16 @@ async fn run_headless(
             Some(Err(e)) => return Err(e.into()),
             Some(Ok(Event::Rejected(r))) => log_rejected(&r),
             Some(Ok(Event::Progress(p))) => log_progress(&p),
+            // Nothing here asks for picks.
+            Some(Ok(Event::Picked(_))) => {}
             Some(Ok(Event::Frame(f))) => {
                 writer.write_frame(&f, received)?;
+                record(recorder, &f)?;
                 if args.frames > 0 && writer.frames_written() >= args.frames {
+                    break;
+                }
+                if script.path_finished(f.camera.as_ref()) {
+                    tracing::info!("the camera path has been played");
                     break;
                 }
                 send_step(&sender, script.on_frame());
@@ -428,6 +477,7 @@ fn run_window(
     window: ViewerWindow,
     mut client: SessionClient,
     script: Script,
+    mut recorder: Option<PathWriter>,
     args: &Args,
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
@@ -451,10 +501,12 @@ fn run_window(
                 match ev? {
                     Event::Rejected(r) => log_rejected(&r),
                     Event::Progress(p) => log_progress(&p),
+                    Event::Picked(_) => {}
                     Event::Frame(f) => {
                         let t0 = Instant::now();
                         let img = decode_frame(&f)?;
                         let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+                        record(&mut recorder, &f)?;
                         let fps = match writer.as_mut() {
                             Some(w) => w.write_decoded(&f, &img, received, decode_ms)?.fps,
                             None => meter.arrive(received).fps,
@@ -482,12 +534,15 @@ fn run_window(
             session_ended_early(count, target)
         })
     };
+    let mut free = script.lock().unwrap_or_else(|e| e.into_inner()).start_camera().map(|c| FreeCamera::new(c, 1.0));
     let exit = window.run(frames_rx, &stop, |m| {
         let mut s = script.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(rig) = s.rig_mut() {
-            rig.orbit(m.yaw);
-            rig.dolly(m.dolly);
-            let _ = sender.send_camera(camera_to_wire(&rig.camera()));
+        if let Some(cam) = free.as_mut() {
+            // Interactive control takes the camera over from an orbit or path.
+            s.stop_camera();
+            cam.orbit(m.yaw, 0.0);
+            cam.dolly(-m.dolly.log(DOLLY_PER_NOTCH));
+            let _ = sender.send_camera(camera_to_wire(&cam.camera()));
         }
     });
     match exit {

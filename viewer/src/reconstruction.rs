@@ -98,6 +98,17 @@ pub fn reconstruction_name(r: i32) -> &'static str {
     }
 }
 
+/// Name of a wire overlay (for stats and the window's status line).
+pub fn overlay_name(o: i32) -> &'static str {
+    match pb::Overlay::try_from(o) {
+        Ok(pb::Overlay::None) => "none",
+        Ok(pb::Overlay::Edges) => "edges",
+        Ok(pb::Overlay::Classes) => "classes",
+        Ok(pb::Overlay::Samples) => "samples",
+        _ => "unspecified",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,5 +136,6 @@ mod tests {
         assert!(Cli::try_parse_from(["x", "--sharp-cutoff", "200"]).is_err());
         assert!(Cli::try_parse_from(["x", "--reconstruction", "magic"]).is_err());
         assert_eq!(reconstruction_name(1), "epr");
+        assert_eq!((overlay_name(2), overlay_name(1), overlay_name(99)), ("edges", "none", "unspecified"));
     }
 }

@@ -1,60 +1,14 @@
-//! Scripted motion that drives a session without a person: the camera orbiting the vertical
-//! axis through its target, and an object sliding back and forth along X (the moving-object
-//! case of paper 000 §6.5 and paper 002). Also the camera rig the window's keys move, so keys
-//! and a scripted orbit compose.
+//! Scripted motion that drives a session without a person: the camera on an orbit or a
+//! camera path ([`crate::camera_path`]), and an object sliding back and forth along X (the
+//! moving-object case of paper 000 §6.5 and paper 002), one step per received frame.
 use anyhow::{anyhow, bail, Result};
 use edgepoint_proto::{self as pb};
 use edgepoint_scene::Camera;
 use glam::{Affine3A, Vec3};
 
+use crate::camera_path::{resolve_path, suggested_orbit, OrbitArgs, PathEntry};
 use crate::client::{camera_from_wire, camera_to_wire};
-
-/// A camera defined by a base camera, a yaw about the vertical axis through the base
-/// target, and a distance scale toward that target. Recomputing from the base each time
-/// keeps long orbits free of accumulated rounding.
-#[derive(Debug, Clone, Copy)]
-pub struct CameraRig {
-    base: Camera,
-    yaw: f32,
-    distance_scale: f32,
-}
-
-/// Closest and farthest dolly, as multiples of the starting distance.
-const DOLLY_MIN: f32 = 0.05;
-const DOLLY_MAX: f32 = 20.0;
-
-impl CameraRig {
-    /// A rig at `base` (yaw 0, original distance).
-    pub fn new(base: Camera) -> Self {
-        CameraRig { base, yaw: 0.0, distance_scale: 1.0 }
-    }
-
-    /// Turns the camera by `radians` about the vertical axis through the target
-    /// (positive: counter-clockwise seen from above).
-    pub fn orbit(&mut self, radians: f32) {
-        self.yaw = (self.yaw + radians).rem_euclid(std::f32::consts::TAU);
-    }
-
-    /// Scales the eye's distance to the target by `factor` (< 1 moves closer), within
-    /// 0.05x..20x the starting distance.
-    pub fn dolly(&mut self, factor: f32) {
-        if factor.is_finite() && factor > 0.0 {
-            self.distance_scale = (self.distance_scale * factor).clamp(DOLLY_MIN, DOLLY_MAX);
-        }
-    }
-
-    /// Current yaw in radians, in [0, 2π).
-    pub fn yaw(&self) -> f32 {
-        self.yaw
-    }
-
-    /// The camera for the current yaw and distance.
-    pub fn camera(&self) -> Camera {
-        let pivot = self.base.target;
-        let eye = pivot + (self.base.eye - pivot) * self.distance_scale;
-        Camera { eye, ..self.base }.orbit(pivot, self.yaw)
-    }
-}
+use edgepoint_scene::Orbit;
 
 /// An object sliding along world X: `offset(k) = A sin(2π k / period)` at the k-th
 /// received frame, applied on top of the object's transform at session start.
@@ -149,66 +103,119 @@ pub struct ScriptStep {
     pub object_move: Option<pb::ObjectMove>,
 }
 
-/// The scripted motion of a run: an optional orbit and an optional object slide, advanced
-/// once per received frame.
+/// Where the camera goes, frame by frame.
+#[derive(Debug, Clone, Default)]
+pub enum CameraPlan {
+    /// Nowhere (the start camera; keys and mouse move it in a window).
+    #[default]
+    Still,
+    /// `--orbit`: the flags over the scene's suggested orbit; `fov` from `--camera fov=`.
+    Orbit { args: OrbitArgs, fov: Option<f32> },
+    /// `--camera-path FILE`: its cameras over the start camera, one per received frame;
+    /// at the end the path stops (or starts again with `looped`).
+    Path { entries: Vec<PathEntry>, name: String, looped: bool },
+}
+
+#[derive(Debug, Clone)]
+enum CameraScript {
+    Still,
+    Orbit { orbit: Orbit, step_degrees: f32, k: u64 },
+    Path { cameras: Vec<Camera>, next: usize, looped: bool },
+}
+
+/// The scripted motion of a run: a camera orbit or path and an optional object slide,
+/// advanced once per received frame.
 #[derive(Debug, Clone)]
 pub struct Script {
-    rig: Option<CameraRig>,
-    orbit_step: Option<f32>,
+    camera: CameraScript,
     slide: Option<ObjectSlide>,
+    start_camera: Option<Camera>,
 }
 
 impl Script {
-    /// A script for a session that started as `started`: orbit at `orbit_degrees_per_frame`
-    /// when given, slide the object `move_object` when given.
-    pub fn new(started: &pb::Started, orbit_degrees_per_frame: Option<f32>, move_object: Option<&str>) -> Result<Self> {
-        let rig = match &started.camera {
-            Some(c) => {
-                let cam = camera_from_wire(c);
-                match cam.validate() {
-                    Ok(()) => Some(CameraRig::new(cam)),
-                    Err(e) if orbit_degrees_per_frame.is_some() => bail!("--orbit: the server's camera is unusable: {e}"),
-                    Err(_) => None,
-                }
+    /// A script for a session that started as `started`: the camera as `plan` says, the
+    /// object `move_object` sliding when given. Errors name the flag (or the path file and
+    /// line) at fault.
+    pub fn new(started: &pb::Started, plan: &CameraPlan, move_object: Option<&str>) -> Result<Self> {
+        let start_camera = started.camera.as_ref().map(camera_from_wire).filter(|c| c.validate().is_ok());
+        let camera = match plan {
+            CameraPlan::Still => CameraScript::Still,
+            CameraPlan::Orbit { args, fov } => {
+                let orbit = args.resolve(&suggested_orbit(started)?, *fov)?;
+                CameraScript::Orbit { orbit, step_degrees: args.orbit_speed, k: 0 }
             }
-            None if orbit_degrees_per_frame.is_some() => bail!("--orbit: the server's `started` carries no camera"),
-            None => None,
+            CameraPlan::Path { entries, name, looped } => {
+                let base = start_camera.ok_or_else(|| anyhow!("--camera-path: the server sent no usable start camera"))?;
+                CameraScript::Path { cameras: resolve_path(entries, &base, name)?, next: 0, looped: *looped }
+            }
         };
-        if let Some(d) = orbit_degrees_per_frame {
-            if !d.is_finite() {
-                bail!("--orbit-speed must be a finite number of degrees, got {d}");
-            }
-        }
         let slide = move_object.map(|name| ObjectSlide::new(started, name)).transpose()?;
-        Ok(Script { rig, orbit_step: orbit_degrees_per_frame.map(f32::to_radians), slide })
+        Ok(Script { camera, slide, start_camera })
     }
 
     /// Whether anything is scripted.
     pub fn is_active(&self) -> bool {
-        self.orbit_step.is_some() || self.slide.is_some()
+        !matches!(self.camera, CameraScript::Still) || self.slide.is_some()
     }
 
-    /// The camera rig (absent when the server sent no usable camera).
-    pub fn rig(&self) -> Option<&CameraRig> {
-        self.rig.as_ref()
+    /// Whether the camera is scripted (an orbit or a path still playing).
+    pub fn drives_camera(&self) -> bool {
+        !matches!(self.camera, CameraScript::Still)
     }
 
-    /// The rig, for interactive moves (keys) that compose with the scripted orbit.
-    pub fn rig_mut(&mut self) -> Option<&mut CameraRig> {
-        self.rig.as_mut()
+    /// The camera the session started with (as the server reported it).
+    pub fn start_camera(&self) -> Option<Camera> {
+        self.start_camera
+    }
+
+    /// Hands the camera over to interactive control: the orbit or path stops.
+    pub fn stop_camera(&mut self) {
+        self.camera = CameraScript::Still;
+    }
+
+    fn next_camera(&mut self) -> Option<Camera> {
+        match &mut self.camera {
+            CameraScript::Still => None,
+            CameraScript::Orbit { orbit, step_degrees, k } => {
+                let c = orbit.camera_after(*k as f32 * *step_degrees);
+                *k += 1;
+                Some(c)
+            }
+            CameraScript::Path { cameras, next, looped } => {
+                if *next >= cameras.len() {
+                    if !*looped {
+                        return None;
+                    }
+                    *next = 0;
+                }
+                *next += 1;
+                Some(cameras[*next - 1])
+            }
+        }
+    }
+
+    /// What to send right after `started`, before any frame: the script's first camera.
+    pub fn first_step(&mut self) -> ScriptStep {
+        ScriptStep { camera: self.next_camera().map(|c| camera_to_wire(&c)), object_move: None }
     }
 
     /// Advances one received frame and says what to send.
     pub fn on_frame(&mut self) -> ScriptStep {
-        let mut step = ScriptStep::default();
-        if let (Some(rig), Some(d)) = (self.rig.as_mut(), self.orbit_step) {
-            rig.orbit(d);
-            step.camera = Some(camera_to_wire(&rig.camera()));
+        let camera = self.next_camera().map(|c| camera_to_wire(&c));
+        let object_move = self.slide.as_mut().map(|s| s.next_move());
+        ScriptStep { camera, object_move }
+    }
+
+    /// Whether a non-looping camera path has been played to its end: every camera was sent
+    /// and `frame_camera` (the camera a received frame reports it was rendered with) is the
+    /// last one.
+    pub fn path_finished(&self, frame_camera: Option<&pb::Camera>) -> bool {
+        match &self.camera {
+            CameraScript::Path { cameras, next, looped: false } => {
+                *next >= cameras.len() && frame_camera.is_some_and(|c| camera_from_wire(c) == cameras[cameras.len() - 1])
+            }
+            _ => false,
         }
-        if let Some(s) = self.slide.as_mut() {
-            step.object_move = Some(s.next_move());
-        }
-        step
     }
 }
 
@@ -231,33 +238,59 @@ mod tests {
         }
     }
 
+    fn orbit_plan(speed: f32) -> CameraPlan {
+        CameraPlan::Orbit { args: OrbitArgs { orbit: true, orbit_speed: speed, ..Default::default() }, fov: None }
+    }
+
     #[test]
-    fn orbit_keeps_distance_and_height_and_turns_by_the_step() {
-        let st = started();
-        let mut s = Script::new(&st, Some(3.0), None).unwrap();
-        let base = camera_from_wire(st.camera.as_ref().unwrap());
-        let mut prev = base;
+    fn the_orbit_starts_at_its_first_camera_and_turns_by_the_step() {
+        let mut st = started();
+        let orbit = Orbit { pivot: Vec3::new(1.0, 0.5, 0.0), radius: 0.8, elevation_degrees: 20.0, start_azimuth_degrees: 45.0, fov_y_degrees: 60.0 };
+        st.orbit = Some(pb::orbit_to_wire(&orbit));
+        let mut s = Script::new(&st, &orbit_plan(3.0), None).unwrap();
+        assert!(s.drives_camera());
+        let first = camera_from_wire(&s.first_step().camera.unwrap());
+        assert_eq!(first, orbit.camera_after(0.0));
         for k in 1..=200u32 {
             let cam = camera_from_wire(&s.on_frame().camera.unwrap());
-            let r0 = base.eye - base.target;
-            let r = cam.eye - cam.target;
-            assert!((r.length() - r0.length()).abs() < 1e-4, "distance kept");
-            assert!((cam.eye.y - base.eye.y).abs() < 1e-5 && cam.target == base.target, "height, pivot kept");
-            // Angle between successive horizontal offsets is the step.
-            let (a, b) = ((prev.eye - prev.target).normalize(), r.normalize());
-            assert!((a.dot(b).clamp(-1.0, 1.0).acos().to_degrees() - 3.0).abs() < 0.05, "frame {k}");
-            // Against the brute-force closed form: rotate the base by k * step.
-            let want = base.orbit(base.target, (3.0 * k as f32).to_radians());
-            assert!((want.eye - cam.eye).length() < 1e-4, "frame {k}: {} vs {}", want.eye, cam.eye);
-            prev = cam;
+            // Against the closed form: the eye on the circle at start + k * step.
+            let a = (45.0 + 3.0 * k as f32).to_radians();
+            let e = 20f32.to_radians();
+            let want = orbit.pivot + 0.8 * Vec3::new(e.cos() * a.sin(), e.sin(), e.cos() * a.cos());
+            assert!((cam.eye - want).length() < 1e-4, "frame {k}: {} vs {want}", cam.eye);
+            assert_eq!((cam.target, cam.fov_y_degrees), (orbit.pivot, 60.0));
         }
+        s.stop_camera();
+        assert!(s.on_frame().camera.is_none() && !s.drives_camera());
+    }
+
+    #[test]
+    fn a_path_plays_once_or_loops() {
+        let st = started();
+        let entries = crate::camera_path::parse_path("{\"fov\":30}\n{\"fov\":31}\n", "p").unwrap();
+        let plan = CameraPlan::Path { entries: entries.clone(), name: "p".into(), looped: false };
+        let mut s = Script::new(&st, &plan, None).unwrap();
+        let fov = |c: Option<pb::Camera>| c.map(|c| c.fov_y_degrees);
+        assert_eq!(fov(s.first_step().camera), Some(30.0));
+        assert!(!s.path_finished(None));
+        let last = s.on_frame().camera;
+        assert_eq!(fov(last.clone()), Some(31.0));
+        assert!(s.on_frame().camera.is_none(), "played once");
+        let first = camera_to_wire(&camera_from_wire(started().camera.as_ref().unwrap()));
+        assert!(!s.path_finished(Some(&first)), "a frame of an earlier camera");
+        assert!(s.path_finished(last.as_ref()), "the frame of the last camera ends it");
+        let plan = CameraPlan::Path { entries, name: "p".into(), looped: true };
+        let mut s = Script::new(&st, &plan, None).unwrap();
+        let got: Vec<_> = std::iter::once(s.first_step().camera).chain((0..4).map(|_| s.on_frame().camera)).map(fov).collect();
+        assert_eq!(got, [Some(30.0), Some(31.0), Some(30.0), Some(31.0), Some(30.0)]);
+        assert!(!s.path_finished(last.as_ref()), "a looping path never ends");
     }
 
     #[test]
     fn slide_composes_with_the_start_transform() {
         let st = started();
         let base = pb::affine_from_wire(st.objects[1].transform.as_ref().unwrap()).unwrap();
-        let mut s = Script::new(&st, None, Some("tallbox")).unwrap();
+        let mut s = Script::new(&st, &CameraPlan::Still, Some("tallbox")).unwrap();
         assert!(s.is_active());
         let amp = 0.25 * 4.0;
         let mut max_off: f32 = 0.0;
@@ -278,29 +311,16 @@ mod tests {
 
     #[test]
     fn unknown_object_lists_the_names() {
-        let msg = Script::new(&started(), None, Some("teapot")).unwrap_err().to_string();
+        let msg = Script::new(&started(), &CameraPlan::Still, Some("teapot")).unwrap_err().to_string();
         assert!(msg.contains("teapot") && msg.contains("floor, tallbox"), "{msg}");
     }
 
     #[test]
-    fn orbit_without_a_camera_is_an_error() {
+    fn orbit_without_a_camera_or_orbit_is_an_error() {
         let st = pb::Started { camera: None, ..started() };
-        assert!(Script::new(&st, Some(1.0), None).is_err());
-        assert!(!Script::new(&st, None, None).unwrap().is_active());
-    }
-
-    #[test]
-    fn dolly_scales_the_distance_within_limits() {
-        let st = started();
-        let mut rig = CameraRig::new(camera_from_wire(st.camera.as_ref().unwrap()));
-        rig.dolly(0.5);
-        assert!((rig.camera().eye - Vec3::new(0.0, 1.0, 2.0)).length() < 1e-6);
-        for _ in 0..100 {
-            rig.dolly(0.5);
-        }
-        let d = (rig.camera().eye - rig.camera().target).length();
-        assert!((d - 4.0 * DOLLY_MIN).abs() < 1e-5, "{d}");
-        rig.orbit(std::f32::consts::FRAC_PI_2);
-        assert!(rig.camera().validate().is_ok());
+        assert!(Script::new(&st, &orbit_plan(1.0), None).is_err());
+        assert!(!Script::new(&st, &CameraPlan::Still, None).unwrap().is_active());
+        let bad = pb::Started { orbit: Some(pb::Orbit { radius: -1.0, ..Default::default() }), ..started() };
+        assert!(Script::new(&bad, &orbit_plan(1.0), None).unwrap_err().to_string().contains("bad orbit"));
     }
 }

@@ -24,7 +24,9 @@ fn help_mentions_every_flag() {
     for flag in [
         "--server", "--local", "--workers", "--worker-threads", "--bin-dir", "--server-arg", "--cluster-log",
         "--cluster-log-file", "--scene", "--width", "--height", "--shader", "--shader-param", "--encoding",
-        "--frames", "--out", "--headless", "--orbit", "--orbit-speed", "--move-object", "--sparseness",
+        "--frames", "--out", "--headless", "--orbit", "--orbit-speed", "--orbit-pivot", "--orbit-radius",
+        "--orbit-elevation", "--orbit-start", "--camera", "--camera-path", "--loop-path", "--record-path",
+        "--move-object", "--sparseness",
         "--max-fps", "--quiet",
     ] {
         assert!(help.contains(&format!("{flag} ")) || help.contains(&format!("{flag}\n")), "--help lacks {flag}:\n{help}");
@@ -47,6 +49,12 @@ fn bad_flag_values_fail_with_a_clear_message() {
         (&["--sparseness", "-3"], &["--sparseness", "positive"]),
         (&["--max-fps", "nan"], &["--max-fps"]),
         (&["--orbit-speed", "inf"], &["--orbit-speed", "finite"]),
+        (&["--camera", "eye=1,2"], &["--camera", "eye needs three numbers"]),
+        (&["--camera", "zoom=2"], &["--camera", "unknown key 'zoom'"]),
+        (&["--orbit", "--orbit-elevation", "89"], &["--orbit-elevation", "85"]),
+        (&["--orbit-radius", "2"], &["--orbit-radius", "--orbit"]),
+        (&["--orbit", "--camera-path", "p.jsonl"], &["--camera-path", "--orbit"]),
+        (&["--loop-path"], &["--loop-path", "--camera-path"]),
         (&["--server", "http://127.0.0.1:1", "--local"], &["--local", "--server"]),
         (&["--no-such-flag"], &["--no-such-flag"]),
     ];
@@ -155,7 +163,9 @@ fn headless_run_writes_pngs_stats_and_drives_the_script() {
         match m {
             edgepoint_proto::viewer_msg::Msg::Camera(c) => {
                 cams += 1;
-                let want = base.orbit(base.target, (5.0 * cams as f32).to_radians());
+                // The first goes out right after `started`: the orbit through the mock's
+                // camera (it suggests none) at its start.
+                let want = base.orbit(base.target, (5.0 * (cams - 1) as f32).to_radians());
                 let got = edgepoint_viewer::client::camera_from_wire(c);
                 assert!((got.eye - want.eye).length() < 1e-4, "camera {cams}: {} vs {}", got.eye, want.eye);
             }
@@ -170,7 +180,7 @@ fn headless_run_writes_pngs_stats_and_drives_the_script() {
             other => panic!("unexpected message {other:?}"),
         }
     }
-    assert!((1..=11).contains(&cams) && (1..=11).contains(&moves), "{cams} cameras, {moves} moves");
+    assert!((2..=12).contains(&cams) && (1..=11).contains(&moves), "{cams} cameras, {moves} moves");
 }
 
 #[test]
@@ -294,4 +304,62 @@ fn children_die_when_the_viewer_is_killed_hard() {
     for pid in pids {
         assert!(eventually(5, || !alive(pid)), "child {pid} survived a SIGKILLed viewer");
     }
+}
+
+#[test]
+fn camera_flags_go_in_start_and_a_recorded_orbit_plays_back_and_stops_at_its_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("orbit.jsonl");
+    // Record six frames of an orbit (each frame reports the newest camera the mock got).
+    let mock = MockServer::start_paced(0);
+    let o = viewer(&[
+        "--server", &mock.url(), "--headless", "--quiet", "--frames", "6", "--width", "16", "--height", "8",
+        "--out", dir.path().join("a").to_str().unwrap(), "--orbit", "--orbit-speed", "10", "--camera", "fov=70",
+        "--record-path", rec.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let start_cam = mock.seen.lock().unwrap().starts[0].camera.clone().unwrap();
+    assert!(start_cam.eye.is_none() && start_cam.target.is_none() && start_cam.fov_y_degrees == 70.0, "{start_cam:?}");
+    let recorded = edgepoint_viewer::camera_path::read_path(&rec).unwrap();
+    assert_eq!(recorded.len(), 6, "one camera per frame");
+    let stats = stats_lines(&dir.path().join("a"));
+    for (s, e) in stats.iter().zip(&recorded) {
+        // The stats line and the recording both hold the camera the frame reports.
+        assert_eq!(s["camera"]["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect::<Vec<_>>(), e.spec.eye.unwrap().to_array());
+        assert_eq!(e.spec.fov_y_degrees, Some(70.0), "the orbit takes --camera fov");
+    }
+
+    // Play it back: every camera is sent in order, and the run stops by itself once a frame
+    // of the last camera has arrived.
+    let mock = MockServer::start_paced(0);
+    let out = dir.path().join("b");
+    let o = viewer(&[
+        "--server", &mock.url(), "--headless", "--quiet", "--width", "16", "--height", "8",
+        "--out", out.to_str().unwrap(), "--camera-path", rec.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let seen = mock.seen.lock().unwrap();
+    let sent: Vec<glam::Vec3> = seen
+        .messages
+        .iter()
+        .filter_map(|m| match m {
+            edgepoint_proto::viewer_msg::Msg::Camera(c) => Some(edgepoint_viewer::client::camera_from_wire(c).eye),
+            _ => None,
+        })
+        .collect();
+    let want: Vec<glam::Vec3> = recorded.iter().map(|e| e.spec.eye.unwrap()).collect();
+    assert_eq!(sent, want);
+    let last = stats_lines(&out).last().cloned().unwrap();
+    assert_eq!(last["camera"]["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect::<Vec<_>>(), want[5].to_array());
+
+    // A path line that is bad is named with its file and line before anything starts.
+    let bad = dir.path().join("bad.jsonl");
+    std::fs::write(&bad, "{\"eye\":[0,1,2]}\n# fine so far\n{\"eye\":[0,1,\"x\"]}\n").unwrap();
+    let o = viewer(&["--server", "http://127.0.0.1:1", "--camera-path", bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains(&format!("{}: line 3:", bad.display())), "{}", stderr(&o));
+    // --orbit places the camera itself.
+    let o = viewer(&["--server", "http://127.0.0.1:1", "--orbit", "--camera", "eye=0,1,2"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("cannot be combined with --orbit"), "{}", stderr(&o));
 }

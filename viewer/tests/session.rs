@@ -31,7 +31,7 @@ fn connect_returns_started_then_frames() {
                     assert_eq!(img, expected_image(f.sequence, 16, 8));
                 }
                 Event::Rejected(r) => panic!("unexpected rejection {r:?}"),
-                Event::Progress(_) => {}
+                Event::Progress(_) | Event::Picked(_) => {}
             }
         }
     });
@@ -63,7 +63,7 @@ fn a_bad_camera_is_rejected_and_the_session_goes_on() {
             match c.next_event().await.unwrap().unwrap() {
                 Event::Rejected(r) => rejected = Some(r),
                 Event::Frame(_) if rejected.is_some() => frames_after += 1,
-                Event::Frame(_) | Event::Progress(_) => {}
+                Event::Frame(_) | Event::Progress(_) | Event::Picked(_) => {}
             }
         }
         let r = rejected.unwrap();

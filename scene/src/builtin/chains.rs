@@ -4,7 +4,7 @@
 //! point lights.
 use super::shapes::{polygon, torus};
 use super::{object, object_at};
-use crate::{Camera, Light, Material, Scene};
+use crate::{Camera, Light, Material, Orbit, Scene};
 use glam::{Affine3A, Quat, Vec3};
 
 /// Ring radius, tube radius and the distance between linked ring centres (metres). Linked
@@ -53,6 +53,14 @@ pub fn chains() -> Scene {
         camera: Camera { eye: Vec3::new(0.2, 1.05, 1.35), target: Vec3::new(0.0, 0.05, 0.0), up: Vec3::Y, fov_y_degrees: 45.0 },
         ambient: Vec3::splat(0.03),
         background: Vec3::ZERO,
+        // Over the floor (±1.5 m), 0.82 m up, looking down at the middle of the chains.
+        orbit: Some(Orbit {
+            pivot: Vec3::new(0.05, 0.05, 0.0),
+            radius: 1.2,
+            elevation_degrees: 40.0,
+            start_azimuth_degrees: 8.4,
+            fov_y_degrees: 45.0,
+        }),
     }
 }
 

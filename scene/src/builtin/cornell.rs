@@ -4,7 +4,7 @@
 //! just under the ceiling centre (hard shadows).
 use super::object;
 use super::shapes::polygon;
-use crate::{Camera, Light, Material, Mesh, NoProgress, Scene};
+use crate::{Camera, Light, Material, Mesh, NoProgress, Orbit, Scene};
 use glam::{Vec2, Vec3};
 
 const MM: f32 = 0.001;
@@ -100,8 +100,21 @@ pub fn cornell(point_light: bool) -> Scene {
         },
         ambient: Vec3::splat(0.03),
         background: Vec3::ZERO,
+        orbit: Some(ORBIT),
     }
 }
+
+/// Inside the box, 14 cm above the tall box (its top is at 0.330 m; the eye circles at
+/// 0.470 m, 8 cm under the ceiling and 5 cm from the walls at the nearest), looking down at
+/// the two boxes with a wide lens, so both are in view all the way round; it starts at the
+/// front, looking toward the back wall like the default camera.
+const ORBIT: Orbit = Orbit {
+    pivot: Vec3::new(0.278, 0.12, 0.28),
+    radius: 0.4134,
+    elevation_degrees: 57.85,
+    start_azimuth_degrees: 180.0,
+    fov_y_degrees: 65.0,
+};
 
 #[cfg(test)]
 mod tests {

@@ -4,7 +4,7 @@
 //! module docs of [`super`].
 use super::shapes::{grid_plate, polygon};
 use super::{object, object_at};
-use crate::{Camera, Light, Material, Mesh, Scene};
+use crate::{Camera, Light, Material, Mesh, Orbit, Scene};
 use glam::{Affine3A, Vec3};
 
 /// The data file the dragon comes from.
@@ -46,5 +46,14 @@ pub fn grid_dragon(dragon: Mesh) -> Scene {
         },
         ambient: Vec3::splat(0.03),
         background: Vec3::ZERO,
+        // Outside the grid's square (±0.18 k) and over the floor (±0.51 k), at the default
+        // camera's height and distance, looking under the grid's edge at the dragon.
+        orbit: Some(Orbit {
+            pivot: Vec3::new(0.0, 0.07, 0.0) * k,
+            radius: 0.479 * k,
+            elevation_degrees: 28.7,
+            start_azimuth_degrees: 31.8,
+            fov_y_degrees: 40.0,
+        }),
     }
 }

@@ -4,7 +4,7 @@
 //! a ball on the table and a ring on the floor.
 use super::shapes::{cuboid, polygon, sphere, torus, Parts};
 use super::{object, object_at};
-use crate::{Camera, Light, Material, Mesh, Object, Scene};
+use crate::{Camera, Light, Material, Mesh, Object, Orbit, Scene};
 use glam::{Affine3A, Vec3};
 
 const ROOM: f32 = 4.0;
@@ -154,6 +154,15 @@ pub fn rooms() -> Scene {
         camera: Camera { eye: Vec3::new(0.6, 1.6, 0.6), target: Vec3::new(6.0, 0.9, 2.2), up: Vec3::Y, fov_y_degrees: 60.0 },
         ambient: Vec3::splat(0.04),
         background: Vec3::ZERO,
+        // In the first room, 1.9 m up (over the shelf, under the lamp), 1.4 m around its
+        // table; it starts looking along +x at the table and through the doorway beyond.
+        orbit: Some(Orbit {
+            pivot: Vec3::new(2.0, 0.6, 2.2),
+            radius: 1.9105,
+            elevation_degrees: 42.88,
+            start_azimuth_degrees: 270.0,
+            fov_y_degrees: 60.0,
+        }),
     }
 }
 

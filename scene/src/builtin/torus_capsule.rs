@@ -3,7 +3,7 @@
 //! capsule its soft shadow hardens: the umbral and penumbral edges meet at the contact.
 use super::shapes::{capsule, polygon, torus};
 use super::{object, object_at};
-use crate::{Camera, Light, Material, Scene};
+use crate::{Camera, Light, Material, Orbit, Scene};
 use glam::{Affine3A, Vec3};
 
 /// Capsule radius and half length of its cylinder; torus ring and tube radii (metres).
@@ -46,6 +46,15 @@ pub fn torus_capsule() -> Scene {
         camera: Camera { eye: Vec3::new(0.35, 0.75, 0.95), target: Vec3::new(0.0, 0.15, 0.0), up: Vec3::Y, fov_y_degrees: 40.0 },
         ambient: Vec3::splat(0.03),
         background: Vec3::ZERO,
+        // Over the floor (±1.2 m), below the light, looking down at the contact; starts
+        // where the default camera stands.
+        orbit: Some(Orbit {
+            pivot: Vec3::new(0.0, 0.15, 0.0),
+            radius: 0.9,
+            elevation_degrees: 35.0,
+            start_azimuth_degrees: 20.2,
+            fov_y_degrees: 40.0,
+        }),
     }
 }
 

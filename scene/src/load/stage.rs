@@ -1,7 +1,7 @@
 //! Staging a bare model as a viewable scene: the model standing on a floor, a point light
 //! above and in front of it, and a camera framing it (used for the paper's "bunny / dragon on
 //! a floor under a point light" setups).
-use crate::{Camera, Light, Material, Mesh, NoProgress, Object, Scene};
+use crate::{Camera, Light, Material, Mesh, NoProgress, Object, Orbit, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
 
@@ -16,6 +16,7 @@ pub fn stage_meshes(name: &str, mut objects: Vec<Object>, mut lights: Vec<Light>
         camera: Camera { eye: Vec3::Z, target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 40.0 },
         ambient: Vec3::splat(0.03),
         background: Vec3::ZERO,
+        orbit: None,
     };
     scene.objects.append(&mut objects);
     let (lo, hi) = scene.bounds();
@@ -50,5 +51,8 @@ pub fn stage_meshes(name: &str, mut objects: Vec<Object>, mut lights: Vec<Light>
     let dist = radius / (fov.to_radians() * 0.5).sin() * 1.05;
     let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
     scene.camera = Camera { eye: centre + dir * dist, target: centre, up: Vec3::Y, fov_y_degrees: fov };
+    // Round the framing target at the framing distance: inside the floor (4 radii wide,
+    // the eye ~2.9 radii out) and outside the model's bounding sphere.
+    scene.orbit = Some(Orbit::through(&scene.camera));
     scene
 }

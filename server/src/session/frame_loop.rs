@@ -15,7 +15,7 @@ use super::feedback::ShadingFeedback;
 use super::output::SessionOutput;
 use super::requests::{build_batches, BatchSpec, RequestRing};
 use crate::rng::mix64;
-use super::settings::{camera_from_wire, resolve_move, Reconstruction, SessionSettings};
+use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use crate::edges::finder::ViewVolume;
@@ -344,6 +344,8 @@ impl FrameLoop {
                 shadow_pairs: self.edge_stats.shadow.pairs as u32,
             }),
             reconstruction: self.settings.reconstruction.to_wire() as i32,
+            camera: Some(camera_to_wire(&self.camera)),
+            overlay: overlay_to_wire(self.settings.overlay) as i32,
         };
         self.out.publish_frame(frame);
     }
@@ -384,6 +386,10 @@ impl FrameLoop {
                         self.ring.reserve(ring_capacity(&new, pixels));
                     }
                     Err(e) => self.out.reject(Code::InvalidArgument, format!("settings ignored: {e}")),
+                },
+                Input::Pick(p) => match super::pick::answer(&self.scene, &self.transforms, &self.camera, &self.cam_frame, p) {
+                    Ok(answer) => self.out.picked(answer),
+                    Err(e) => self.out.reject(Code::InvalidArgument, format!("pick ignored: {e}")),
                 },
             }
         }

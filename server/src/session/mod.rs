@@ -15,6 +15,7 @@ mod edge_source;
 mod feedback;
 mod frame_loop;
 mod output;
+pub mod pick;
 mod requests;
 mod settings;
 
@@ -43,6 +44,8 @@ pub enum Input {
     Camera(pb::Camera),
     Move(pb::ObjectMove),
     Settings(pb::Settings),
+    /// Which object is under a pixel: answered with a `Picked` ([`pick`]).
+    Pick(pb::Pick),
 }
 
 /// Everything a session is made from (validated by the caller, except settings ranges

@@ -2,7 +2,7 @@
 //! latest-frame-wins — the frame loop never waits for a slow link, a newer frame replaces one
 //! the viewer has not taken yet (counted as dropped) — while `Rejected` notices are queued
 //! and never replaced, since each answers one viewer message.
-use edgepoint_proto::{server_msg, Frame, Rejected, ServerMsg};
+use edgepoint_proto::{server_msg, Frame, Picked, Rejected, ServerMsg};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -16,6 +16,8 @@ pub const MAX_QUEUED_REJECTIONS: usize = 256;
 struct Slots {
     frame: Option<Frame>,
     rejected: VecDeque<Rejected>,
+    /// Answers to picks, queued like rejections (each answers one viewer message).
+    picked: VecDeque<Picked>,
     ended: bool,
 }
 
@@ -81,6 +83,18 @@ impl SessionOutput {
         self.notify.notify_one();
     }
 
+    /// Queues the answer to a pick (bounded like rejections).
+    pub fn picked(&self, p: Picked) {
+        {
+            let mut s = self.slots();
+            if s.picked.len() >= MAX_QUEUED_REJECTIONS {
+                s.picked.pop_front();
+            }
+            s.picked.push_back(p);
+        }
+        self.notify.notify_one();
+    }
+
     /// The frame loop has ended: once the queued messages are taken, [`Self::next`] ends.
     pub fn end(&self) {
         self.slots().ended = true;
@@ -108,11 +122,15 @@ impl SessionOutput {
         self.closed.load(Ordering::SeqCst)
     }
 
-    /// Takes what is ready without waiting: rejections first, then the newest frame.
+    /// Takes what is ready without waiting: rejections first, then pick answers, then the
+    /// newest frame.
     pub fn try_next(&self) -> Option<ServerMsg> {
         let mut s = self.slots();
         if let Some(r) = s.rejected.pop_front() {
             return Some(ServerMsg { msg: Some(server_msg::Msg::Rejected(r)) });
+        }
+        if let Some(p) = s.picked.pop_front() {
+            return Some(ServerMsg { msg: Some(server_msg::Msg::Picked(p)) });
         }
         s.frame.take().map(|f| ServerMsg { msg: Some(server_msg::Msg::Frame(f)) })
     }
@@ -188,6 +206,18 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, MAX_QUEUED_REJECTIONS);
+    }
+
+    #[test]
+    fn pick_answers_queue_ahead_of_frames() {
+        let out = SessionOutput::new();
+        out.publish_frame(frame(3));
+        out.picked(Picked { id: 11, ..Default::default() });
+        match out.try_next().unwrap().msg {
+            Some(server_msg::Msg::Picked(p)) => assert_eq!(p.id, 11),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(seq_of(out.try_next().unwrap()), 3);
     }
 
     #[tokio::test]

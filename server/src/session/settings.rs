@@ -24,6 +24,16 @@ impl Reconstruction {
     }
 }
 
+/// The wire name of an overlay (frames say which one they carry).
+pub fn overlay_to_wire(o: Overlay) -> pb::Overlay {
+    match o {
+        Overlay::None => pb::Overlay::None,
+        Overlay::Edges => pb::Overlay::Edges,
+        Overlay::Classes => pb::Overlay::Classes,
+        Overlay::Samples => pb::Overlay::Samples,
+    }
+}
+
 /// The settings in force in a session (paper 000 §7.2: sparseness 40–125 in the paper).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SessionSettings {

@@ -134,7 +134,7 @@ impl Viewer {
                 Out::Frame(f) => return (f, rejected),
                 Out::Rejected(r) => rejected.push(r),
                 Out::Started(_) => panic!("second started"),
-                Out::Progress(_) => {}
+                Out::Progress(_) | Out::Picked(_) => {}
             }
         }
     }

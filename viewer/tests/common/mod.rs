@@ -67,6 +67,7 @@ pub fn mock_started() -> pb::Started {
         scene_min: Some(Vec3::new(-1.0, 0.0, -1.0).into()),
         scene_max: Some(Vec3::new(1.0, 2.0, 1.0).into()),
         lights: 1,
+        orbit: None,
     }
 }
 
@@ -102,6 +103,14 @@ impl Renderer for Mock {
         let (tx, rx) = mpsc::channel(2);
         let limit = self.frame_limit;
         let (paced, arrived) = (self.paced, Arc::new(tokio::sync::Notify::new()));
+        // Frames report the newest camera the viewer sent, as the real server does.
+        let scene_cam = edgepoint_viewer::client::camera_from_wire(mock_started().camera.as_ref().unwrap());
+        let first = match &start.camera {
+            Some(c) => pb::camera_over(c, &scene_cam).map_err(Status::invalid_argument)?,
+            None => scene_cam,
+        };
+        let camera = Arc::new(Mutex::new(Some(edgepoint_viewer::client::camera_to_wire(&first))));
+        let camera_in = camera.clone();
         let arrived_in = arrived.clone();
         let frames_tx = tx.clone();
         tokio::spawn(async move {
@@ -132,6 +141,7 @@ impl Renderer for Mock {
                     samples_requested: 12,
                     live_workers: 2,
                     pixels: Some(pb::PixelCounts { with_point: 7, ..Default::default() }),
+                    camera: camera.lock().unwrap().clone(),
                     ..Default::default()
                 };
                 if frames_tx.send(Ok(pb::ServerMsg { msg: Some(server_msg::Msg::Frame(frame)) })).await.is_err() {
@@ -148,6 +158,7 @@ impl Renderer for Mock {
             while let Ok(Some(m)) = inbound.message().await {
                 let Some(msg) = m.msg else { continue };
                 if let viewer_msg::Msg::Camera(c) = &msg {
+                    *camera_in.lock().unwrap() = Some(c.clone());
                     if c.eye.as_ref().is_some_and(|e| !e.x.is_finite()) {
                         let r = pb::Rejected { code: 3, message: "camera eye is not finite".into() };
                         if let Some(tx) = tx.upgrade() {
