@@ -49,9 +49,10 @@ pub struct SceneArgs {
     /// Shader parameter KEY=VALUE (repeatable), e.g. shadow_rays=16.
     #[arg(long = "shader-param", value_parser = parse_param)]
     pub shader_params: Vec<(String, f64)>,
-    /// Samples per pixel of the converged reference.
-    #[arg(long, default_value_t = 64)]
-    pub reference_spp: u32,
+    /// Samples per pixel of the converged reference (default: 64 for `frame` and
+    /// `reference`, 16 for `motion`, which renders one per frame).
+    #[arg(long)]
+    pub reference_spp: Option<u32>,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
     #[arg(long, default_value = "target/edgepoint-refs")]
     pub ref_cache: PathBuf,
@@ -105,7 +106,7 @@ pub fn parse_param(s: &str) -> Result<(String, f64), String> {
     Ok((k.trim().to_string(), v))
 }
 
-fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
+pub(crate) fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
     LocalCluster::start(LocalOptions {
         workers: a.workers,
         worker_threads: a.worker_threads,
@@ -114,6 +115,9 @@ fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
     })
     .context("starting the local cluster (run `cargo build --release` first)")
 }
+
+/// Samples per pixel of `frame`'s and `reference`'s converged references.
+pub const DEFAULT_REFERENCE_SPP: u32 = 64;
 
 /// The two reference renders of a frame setup.
 pub struct References {
@@ -136,12 +140,12 @@ async fn references(
     let dispatcher = pool.open(source.clone(), hash.clone());
     let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
     let cache = RefCache::new(&a.ref_cache);
-    let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp, &a.shader, &params);
-    let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp) {
+    let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), &a.shader, &params);
+    let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)) {
         Some(img) => (img, true),
         None => {
-            let progress = LogProgress::new(&format!("reference {}spp", a.reference_spp));
-            let img = render_reference(&dispatcher, camera, a.width, a.height, a.reference_spp, &a.shader, &params, &progress)
+            let progress = LogProgress::new(&format!("reference {}spp", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
+            let img = render_reference(&dispatcher, camera, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), &a.shader, &params, &progress)
                 .await
                 .context("converged reference render")?;
             cache.store(&key, &img)?;
@@ -288,7 +292,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             let s = ssim(&frame_lin, &refs.converged.pixels, a.width, a.height);
             let p1 = psnr(&refs.one_spp.pixels, &refs.converged.pixels);
             let full_rt_s = refs.one_spp.elapsed.as_secs_f64();
-            out["reference_spp"] = json!(a.reference_spp);
+            out["reference_spp"] = json!(a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP));
             out["reference_cached"] = json!(refs.converged_cached);
             out["psnr_last_frame_db"] = json!(p);
             out["ssim_last_frame"] = json!(s);
@@ -297,7 +301,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             // Paper Table 2: "Full RT (s)" over the frame's total pipeline time.
             out["speedup_vs_full_rt"] = json!(if median_total > 0.0 { full_rt_s * 1e3 / median_total } else { 0.0 });
             if let Some(dir) = &args.out {
-                write_png(&dir.join(format!("reference_{}spp.png", a.reference_spp)), a.width, a.height, &refs.converged.pixels)?;
+                write_png(&dir.join(format!("reference_{}spp.png", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP))), a.width, a.height, &refs.converged.pixels)?;
                 write_png(&dir.join("reference_1spp.png"), a.width, a.height, &refs.one_spp.pixels)?;
             }
         }
@@ -331,7 +335,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 table,
                 "  PSNR frame {} vs {}spp reference: {:.2} dB (SSIM {:.4}); 1-spp full RT: {:.2} dB in {:.2} s; speedup {:.1}x",
                 last.sequence,
-                a.reference_spp,
+                a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP),
                 p.as_f64().unwrap_or(0.0),
                 out["ssim_last_frame"].as_f64().unwrap_or(0.0),
                 out["psnr_full_rt_1spp_db"].as_f64().unwrap_or(0.0),
@@ -358,13 +362,13 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
         };
         let refs = references(&cluster, a, &source, &camera).await?;
         std::fs::create_dir_all(&args.out)?;
-        let conv = args.out.join(format!("reference_{}spp.png", a.reference_spp));
+        let conv = args.out.join(format!("reference_{}spp.png", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
         let one = args.out.join("reference_1spp.png");
         write_png(&conv, a.width, a.height, &refs.converged.pixels)?;
         write_png(&one, a.width, a.height, &refs.one_spp.pixels)?;
         let out = json!({
             "scene": a.scene, "width": a.width, "height": a.height, "workers": a.workers,
-            "reference_spp": a.reference_spp,
+            "reference_spp": a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP),
             "converged_s": refs.converged.elapsed.as_secs_f64(), "converged_cached": refs.converged_cached,
             "full_rt_1spp_s": refs.one_spp.elapsed.as_secs_f64(),
             "psnr_1spp_vs_converged_db": psnr(&refs.one_spp.pixels, &refs.converged.pixels),
@@ -372,7 +376,7 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
         });
         let table = format!(
             "references of {} at {}x{}: {}spp in {:.2} s{}, 1spp in {:.2} s ({:.2} dB vs converged)\n  {}\n  {}\n",
-            a.scene, a.width, a.height, a.reference_spp, refs.converged.elapsed.as_secs_f64(),
+            a.scene, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), refs.converged.elapsed.as_secs_f64(),
             if refs.converged_cached { " (cached)" } else { "" },
             refs.one_spp.elapsed.as_secs_f64(), out["psnr_1spp_vs_converged_db"].as_f64().unwrap_or(0.0),
             conv.display(), one.display()

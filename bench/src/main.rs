@@ -20,11 +20,16 @@
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
+//! - `motion`: quality in motion — every frame of a scripted path (orbit, dolly, object
+//!   slide, camera path file) against the converged reference of its exact state: PSNR,
+//!   SSIM, outlier pixels, the moved object's coverage, frames to fill newly exposed
+//!   regions; edge-and-point and Render Cache side by side.
 mod edges;
 mod epi;
 mod frame;
 mod inprocess;
 mod load;
+mod motion;
 mod loadtest;
 mod quality;
 mod rays;
@@ -59,6 +64,9 @@ enum Cmd {
     Epi(epi::EpiArgs),
     /// PSNR/SSIM of edge-and-point vs Render Cache reconstruction from the same samples.
     Quality(quality::QualityArgs),
+    /// Quality in motion: a session along an orbit, dolly, object slide or camera path,
+    /// every frame against the converged reference of its exact state.
+    Motion(motion::MotionArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -78,6 +86,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
         Cmd::Edges(a) => edges::run(a),
+        Cmd::Motion(a) => motion::run(a),
     }
 }
 

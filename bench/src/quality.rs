@@ -161,7 +161,7 @@ pub fn run(args: QualityArgs) -> Result<()> {
             cache.interpolate_gaps(&mut t);
             let (points, image, weights) = cache.reconstruction_target();
             if !args.no_hole_fill {
-                baseline_holes.fill(points, weights, image, &mut fill);
+                baseline_holes.fill(points, weights, image, &mut fill, None);
             }
             let baseline = cache.image().to_vec();
             let counts = epi.build(&edges, &cam, cache.point_image(), !args.no_complex_filter, &mut t);

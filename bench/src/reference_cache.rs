@@ -18,7 +18,14 @@ impl RefCache {
     }
 
     /// A file name that changes whenever anything that affects the image changes.
-    pub fn key(
+    pub fn key(scene_hash: &str, cam: &Camera, width: u32, height: u32, spp: u32, shader: &str, params: &HashMap<String, f64>) -> String {
+        Self::key_with(scene_hash, cam, width, height, spp, shader, params, "")
+    }
+
+    /// [`Self::key`] for a scene state described by `state` too (e.g. moved objects'
+    /// transforms; empty for the scene's default state).
+    #[allow(clippy::too_many_arguments)]
+    pub fn key_with(
         scene_hash: &str,
         cam: &Camera,
         width: u32,
@@ -26,10 +33,11 @@ impl RefCache {
         spp: u32,
         shader: &str,
         params: &HashMap<String, f64>,
+        state: &str,
     ) -> String {
         let mut p: Vec<_> = params.iter().map(|(k, v)| format!("{k}={v}")).collect();
         p.sort();
-        let desc = format!(
+        let mut desc = format!(
             "{scene_hash}|{:?}|{:?}|{:?}|{}|{width}x{height}|{spp}|{shader}|{}",
             cam.eye.to_array(),
             cam.target.to_array(),
@@ -37,6 +45,10 @@ impl RefCache {
             cam.fov_y_degrees,
             p.join(",")
         );
+        if !state.is_empty() {
+            desc += "|";
+            desc += state;
+        }
         let src = edgepoint_proto::SceneSource {
             source: Some(edgepoint_proto::scene_source::Source::Builtin(desc)),
         };

@@ -72,7 +72,7 @@ fn edge_and_point_beats_the_render_cache_from_the_same_samples() {
         cache.reproject_points(&cam, None, &mut times);
         cache.interpolate_gaps(&mut times);
         let (points, image, weights) = cache.reconstruction_target();
-        BaselineHoles::default().fill(points, weights, image, &mut pyramid);
+        BaselineHoles::default().fill(points, weights, image, &mut pyramid, None);
         let baseline = cache.image().to_vec();
 
         let mut epi = Epi::new(w, h);

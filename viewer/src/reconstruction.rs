@@ -14,6 +14,20 @@ pub enum ReconstructionMode {
     RenderCache,
 }
 
+impl ReconstructionMode {
+    pub fn to_wire(self) -> pb::Reconstruction {
+        match self {
+            ReconstructionMode::Epr => pb::Reconstruction::EdgeAndPoint,
+            ReconstructionMode::RenderCache => pb::Reconstruction::RenderCache,
+        }
+    }
+
+    /// The name on the command line and in stats.
+    pub fn name(self) -> &'static str {
+        reconstruction_name(self.to_wire() as i32)
+    }
+}
+
 /// A diagnostic overlay drawn over the frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum OverlayMode {
@@ -67,10 +81,7 @@ impl ReconstructionArgs {
     /// Writes the switches given into `s` (the others keep the server's values).
     pub fn apply(&self, s: &mut pb::Settings) {
         if let Some(m) = self.reconstruction {
-            s.reconstruction = match m {
-                ReconstructionMode::Epr => pb::Reconstruction::EdgeAndPoint,
-                ReconstructionMode::RenderCache => pb::Reconstruction::RenderCache,
-            } as i32;
+            s.reconstruction = m.to_wire() as i32;
         }
         if self.no_complex_filter {
             s.complex_filter = Some(false);

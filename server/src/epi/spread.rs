@@ -12,7 +12,7 @@
 //! Breadth-first layers make the result independent of scan order: each layer reads only
 //! colours of earlier layers.
 use super::reach::{Neighbours, NB_PLANES};
-use crate::render_cache::holes::{holes_from_weights, HoleFill};
+use crate::render_cache::holes::{holes_from_weights, HoleFill, ObjectFill};
 use crate::render_cache::PointImage;
 use glam::Vec3;
 
@@ -155,12 +155,19 @@ pub struct BaselineHoles {
 
 impl BaselineHoles {
     /// Fills the pixels of the baseline's frame that no sample reached (no point, weight 0):
-    /// colours spread from neighbouring pixels ignoring edges, then the pyramid fill for the
-    /// rest — the same steps as edge-and-point reconstruction minus the edges. Returns the
-    /// pixels filled.
-    pub fn fill(&mut self, points: &PointImage, weights: &[f32], image: &mut [Vec3], pyramid: &mut HoleFill) -> u32 {
+    /// within the frame's objects when their per-pixel ids are given (as edge-and-point
+    /// reconstruction does), colours spread from neighbouring pixels ignoring edges, then
+    /// the pyramid fill for the rest — the same steps as edge-and-point reconstruction minus
+    /// the edges. Returns the pixels filled.
+    pub fn fill(&mut self, points: &PointImage, weights: &[f32], image: &mut [Vec3], pyramid: &mut HoleFill, objects: Option<(&[u32], &mut ObjectFill)>) -> u32 {
         let (w, h) = (points.width as usize, points.height as usize);
         holes_from_weights(points, weights, &mut self.holes);
+        let mut n = 0;
+        if let Some((ids, of)) = objects {
+            let (k, left) = of.fill(w, h, &self.holes, ids, image);
+            n += k;
+            self.holes.copy_from_slice(left);
+        }
         let words = w.div_ceil(64);
         self.filled.clear();
         self.filled.extend(self.holes.iter().enumerate().map(|(i, &b)| {
@@ -168,7 +175,7 @@ impl BaselineHoles {
             let valid = if 64 * (j + 1) <= w { !0 } else { (1u64 << (w - 64 * j)) - 1 };
             valid & !b
         }));
-        let mut n = self.spread.run_unconstrained(w, h, &mut self.filled, &mut self.holes, image);
+        n += self.spread.run_unconstrained(w, h, &mut self.filled, &mut self.holes, image);
         n += pyramid.fill(points, &self.holes, image);
         n
     }

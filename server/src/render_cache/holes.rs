@@ -157,6 +157,102 @@ fn push(levels: &[Level], x: usize, y: usize) -> Option<Vec3> {
     None
 }
 
+/// Filling holes within the surfaces the frame's exact visibility shows
+/// (`crate::visibility`): a hole takes its colour from the nearest pixels that show the same
+/// object and have a colour (breadth first through the object's hole pixels, each pixel the
+/// mean of its already coloured 4-neighbours on the object). Where a box's side has just
+/// come into view, it is filled from the box, not from the wall beside it; the background
+/// from background samples. Holes on an object with no coloured pixel in their reach are left
+/// for [`HoleFill`]. Cost: work per hole pixel only.
+#[derive(Default)]
+pub struct ObjectFill {
+    /// Hole bits still unfilled (a copy of the caller's, cleared as pixels are filled).
+    todo: Vec<u64>,
+    /// Pixels queued for the current / next round.
+    round: Vec<u32>,
+    next: Vec<u32>,
+    /// Bits of pixels already queued.
+    queued: Vec<u64>,
+    colours: Vec<Vec3>,
+}
+
+impl ObjectFill {
+    /// Bytes held (grows with the holes of the frames seen).
+    pub fn bytes(&self) -> usize {
+        8 * (self.todo.capacity() + self.queued.capacity()) + 4 * (self.round.capacity() + self.next.capacity()) + 12 * self.colours.capacity()
+    }
+
+    /// Fills the hole pixels (bits in `holes`, `ceil(width / 64)` words per row) reachable
+    /// from coloured pixels of the same object (`objects`, per pixel; any id, the background
+    /// too). Returns the pixels filled and the hole bits left.
+    pub fn fill(&mut self, width: usize, height: usize, holes: &[u64], objects: &[u32], image: &mut [Vec3]) -> (u32, &[u64]) {
+        let words = width.div_ceil(64);
+        self.todo.clear();
+        self.todo.extend_from_slice(holes);
+        self.queued.clear();
+        self.queued.resize(self.todo.len(), 0);
+        let bit = |v: &[u64], i: usize| v[(i / width) * words + (i % width) / 64] >> (i % width % 64) & 1 != 0;
+        let set = |v: &mut [u64], i: usize| v[(i / width) * words + (i % width) / 64] |= 1 << (i % width % 64);
+        let clear = |v: &mut [u64], i: usize| v[(i / width) * words + (i % width) / 64] &= !(1 << (i % width % 64));
+        let neighbours = |i: usize| {
+            let (x, y) = (i % width, i / width);
+            [
+                (x > 0).then(|| i - 1),
+                (x + 1 < width).then(|| i + 1),
+                (y > 0).then(|| i - width),
+                (y + 1 < height).then(|| i + width),
+            ]
+        };
+        // Round 0: holes beside a coloured pixel of their object.
+        self.round.clear();
+        for (wi, &word) in holes.iter().enumerate() {
+            let mut b = word;
+            while b != 0 {
+                let i = (wi / words) * width + (wi % words) * 64 + b.trailing_zeros() as usize;
+                b &= b - 1;
+                if neighbours(i).into_iter().flatten().any(|j| !bit(holes, j) && objects[j] == objects[i]) {
+                    self.round.push(i as u32);
+                    set(&mut self.queued, i);
+                }
+            }
+        }
+        let mut filled = 0u32;
+        while !self.round.is_empty() {
+            // Colours from pixels coloured before this round only, then written at once.
+            self.colours.clear();
+            for &i in &self.round {
+                let i = i as usize;
+                let (mut sum, mut n) = (Vec3::ZERO, 0u32);
+                for j in neighbours(i).into_iter().flatten() {
+                    if !bit(&self.todo, j) && objects[j] == objects[i] {
+                        sum += image[j];
+                        n += 1;
+                    }
+                }
+                self.colours.push(sum / n.max(1) as f32);
+            }
+            self.next.clear();
+            for (k, &i) in self.round.iter().enumerate() {
+                let i = i as usize;
+                image[i] = self.colours[k];
+                clear(&mut self.todo, i);
+                filled += 1;
+            }
+            for k in 0..self.round.len() {
+                let i = self.round[k] as usize;
+                for j in neighbours(i).into_iter().flatten() {
+                    if bit(&self.todo, j) && !bit(&self.queued, j) && objects[j] == objects[i] {
+                        set(&mut self.queued, j);
+                        self.next.push(j as u32);
+                    }
+                }
+            }
+            std::mem::swap(&mut self.round, &mut self.next);
+        }
+        (filled, &self.todo)
+    }
+}
+
 /// Hole bits from a reconstruction's filter weights: pixels without a point whose weight is
 /// zero (no sample reached them). `holes` gets `ceil(width / 64)` words per row.
 pub fn holes_from_weights(points: &PointImage, weights: &[f32], holes: &mut Vec<u64>) {
@@ -181,6 +277,41 @@ pub fn holes_from_weights(points: &PointImage, weights: &[f32], holes: &mut Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn object_fill_stays_within_objects_and_leaves_unreachable_holes() {
+        // Left half object 1 (one red pixel coloured), right half object 2 (one blue pixel);
+        // a strip of object 3 with no coloured pixel; everything else a hole.
+        let (w, h) = (70usize, 9usize);
+        let words = w.div_ceil(64);
+        let obj: Vec<u32> = (0..w * h).map(|i| if i / w == 8 { 3 } else if i % w < 35 { 1 } else { 2 }).collect();
+        let (red, blue) = (Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0));
+        let mut image = vec![Vec3::splat(-1.0); w * h];
+        let mut holes = vec![!0u64; words * h];
+        for y in 0..h {
+            holes[y * words + 1] = (1 << (w - 64)) - 1;
+        }
+        let mut colour = |x: usize, y: usize, c: Vec3| {
+            image[y * w + x] = c;
+            holes[y * words + x / 64] &= !(1 << (x % 64));
+        };
+        colour(3, 2, red);
+        colour(60, 6, blue);
+        let mut f = ObjectFill::default();
+        let (n, left) = f.fill(w, h, &holes, &obj, &mut image);
+        assert_eq!(n as usize, 8 * w - 2, "every hole of objects 1 and 2");
+        for y in 0..8 {
+            for x in 0..w {
+                assert_eq!(image[y * w + x], if x < 35 { red } else { blue }, "({x},{y})");
+            }
+        }
+        // The strip of object 3 stays a hole, for the pyramid.
+        for x in 0..w {
+            assert!(left[8 * words + x / 64] >> (x % 64) & 1 == 1);
+            assert_eq!(image[8 * w + x], Vec3::splat(-1.0));
+        }
+        assert!((0..8).all(|y| left[y * words] == 0 && left[y * words + 1] == 0));
+    }
 
     fn image(w: usize, h: usize, samples: &[(usize, usize, Vec3)]) -> PointImage {
         let n = w * h;

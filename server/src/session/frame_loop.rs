@@ -23,7 +23,7 @@ use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, encode_frame};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
-use crate::render_cache::holes::HoleFill;
+use crate::render_cache::holes::{HoleFill, ObjectFill};
 use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
@@ -105,6 +105,7 @@ pub(super) struct FrameLoop {
     edges: Vec<EdgeSegment>,
     edge_stats: EdgeSourceStats,
     holes: HoleFill,
+    object_fill: ObjectFill,
     baseline_holes: BaselineHoles,
     sampler: Sampler,
     dispatcher: Dispatcher,
@@ -123,6 +124,11 @@ pub(super) struct FrameLoop {
     inputs_open: bool,
     pending: Vec<Input>,
     pub counters: SessionCounters,
+    /// Whether a frame has been published: until the first samples arrive, the viewer gets
+    /// progress instead of black frames.
+    shown: bool,
+    /// The last waiting state reported to the viewer (live workers, workers, requested).
+    waiting_reported: Option<(usize, usize, bool)>,
 }
 
 impl FrameLoop {
@@ -157,11 +163,12 @@ impl FrameLoop {
             edge_source: SessionEdges::new(
                 p.scene.clone(),
                 p.edge_index.clone(),
-                Box::new(crate::reference::LogProgress::new(&format!("session {}: edge trees", &p.id[..p.id.len().min(8)]))),
+                Box::new(super::ViewerProgress::new(out.clone(), "edge trees", &format!("session {}: edge trees", &p.id[..p.id.len().min(8)]))),
             ),
             edges: Vec::new(),
             edge_stats: EdgeSourceStats::default(),
             holes: HoleFill::new(p.width, p.height),
+            object_fill: ObjectFill::default(),
             baseline_holes: BaselineHoles::default(),
             sampler: Sampler::new(p.width, p.height, p.seed),
             dispatcher,
@@ -180,6 +187,8 @@ impl FrameLoop {
             inputs_open: true,
             pending: Vec::new(),
             counters: SessionCounters::default(),
+            shown: false,
+            waiting_reported: None,
             scene: p.scene,
         }
     }
@@ -228,6 +237,22 @@ impl FrameLoop {
         let t = Instant::now();
         let samples_requested = self.send_requests();
         self.times.add("requests", ms_since(t));
+
+        if !self.shown && self.cache.is_empty() {
+            // Nothing to show yet (the workers are loading the scene, or the first samples
+            // are on their way): say so instead of sending a black frame.
+            self.report_waiting();
+            return;
+        }
+        if !self.shown {
+            self.shown = true;
+            self.out.progress(pb::Progress {
+                stage: "first samples".into(),
+                done: 1,
+                total: 1,
+                message: format!("first frame after {:.2} s", self.start.elapsed().as_secs_f64()),
+            });
+        }
 
         if epi_counts.is_some() && self.settings.overlay != Overlay::None {
             let t = Instant::now();
@@ -292,10 +317,15 @@ impl FrameLoop {
         // the baseline.
         let t = Instant::now();
         let (points, image, weights) = self.cache.reconstruction_target();
+        // Within the objects the exact visibility shows first, so a surface that just came
+        // into view takes its colour from itself, not from what lies beside it.
+        let objects = self.visibility.objects();
         if epr {
-            self.holes.fill(points, self.epi.holes(), image);
+            let (w, h) = (self.width as usize, self.height as usize);
+            let (_, left) = self.object_fill.fill(w, h, self.epi.holes(), objects, image);
+            self.holes.fill(points, left, image);
         } else {
-            self.baseline_holes.fill(points, weights, image, &mut self.holes);
+            self.baseline_holes.fill(points, weights, image, &mut self.holes, Some((objects, &mut self.object_fill)));
         }
         self.times.add(STAGE_HOLES, ms_since(t));
         (counts, epi_counts)
@@ -348,6 +378,36 @@ impl FrameLoop {
             overlay: overlay_to_wire(self.settings.overlay) as i32,
         };
         self.out.publish_frame(frame);
+    }
+
+    /// Tells the viewer what the session waits for before its first frame: the shader
+    /// workers that have loaded the scene (parsed it and built their BVHs), then the first
+    /// samples. Sent when it changes.
+    fn report_waiting(&mut self) {
+        let (live, workers) = (self.dispatcher.live_workers(), self.dispatcher.workers());
+        let requested = self.counters.samples_requested > 0;
+        let state = (live, workers, requested);
+        if self.waiting_reported == Some(state) {
+            return;
+        }
+        self.waiting_reported = Some(state);
+        self.out.progress(pb::Progress {
+            stage: "workers".into(),
+            done: live as u64,
+            total: workers as u64,
+            message: match workers {
+                0 => "no shader workers yet".to_string(),
+                _ => format!("{live} of {workers} shader workers have the scene loaded (parsed, BVH built)"),
+            },
+        });
+        if live > 0 {
+            self.out.progress(pb::Progress {
+                stage: "first samples".into(),
+                done: 0,
+                total: 1,
+                message: format!("waiting for the first samples ({} requested)", self.counters.samples_requested),
+            });
+        }
     }
 
     /// Applies every input received so far, in order. Bad ones are answered with a

@@ -15,6 +15,7 @@ mod edge_source;
 mod feedback;
 mod frame_loop;
 mod output;
+mod progress;
 pub mod pick;
 mod requests;
 mod settings;
@@ -23,6 +24,7 @@ pub use edge_source::{EdgeIndexSlot, EdgeSourceStats, SessionEdges, TripleSet};
 pub use feedback::{ObjectSeen, ShadingFeedback, TripleKey, TripleSeen};
 pub use frame_loop::{max_outstanding, SessionCounters, OUTSTANDING_FRAMES, TARGET_SAMPLE_LATENCY};
 pub use output::{SessionOutput, MAX_QUEUED_REJECTIONS};
+pub use progress::ViewerProgress;
 pub use requests::{build_batches, BatchSpec, RequestInfo, RequestRing};
 pub use settings::{
     camera_from_wire, camera_to_wire, resolve_move, Reconstruction, SessionSettings, BATCH_SIZE_RANGE, MAX_AGE_RANGE,

@@ -1,8 +1,9 @@
 //! What a session sends to its viewer (DESIGN.md "Frames to the viewer"): frames are
 //! latest-frame-wins — the frame loop never waits for a slow link, a newer frame replaces one
 //! the viewer has not taken yet (counted as dropped) — while `Rejected` notices are queued
-//! and never replaced, since each answers one viewer message.
-use edgepoint_proto::{server_msg, Frame, Picked, Rejected, ServerMsg};
+//! and never replaced, since each answers one viewer message. Progress of long work is
+//! latest-wins per stage (the viewer wants the state of the work, not its history).
+use edgepoint_proto::{server_msg, Frame, Picked, Progress, Rejected, ServerMsg};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -18,6 +19,8 @@ struct Slots {
     rejected: VecDeque<Rejected>,
     /// Answers to picks, queued like rejections (each answers one viewer message).
     picked: VecDeque<Picked>,
+    /// The newest progress of each stage not yet taken, in the order the stages began.
+    progress: Vec<Progress>,
     ended: bool,
 }
 
@@ -95,6 +98,19 @@ impl SessionOutput {
         self.notify.notify_one();
     }
 
+    /// Offers the newest state of a stage of the session's long work; an untaken one of
+    /// the same stage is replaced.
+    pub fn progress(&self, p: Progress) {
+        {
+            let mut s = self.slots();
+            match s.progress.iter_mut().find(|q| q.stage == p.stage) {
+                Some(q) => *q = p,
+                None => s.progress.push(p),
+            }
+        }
+        self.notify.notify_one();
+    }
+
     /// The frame loop has ended: once the queued messages are taken, [`Self::next`] ends.
     pub fn end(&self) {
         self.slots().ended = true;
@@ -122,8 +138,8 @@ impl SessionOutput {
         self.closed.load(Ordering::SeqCst)
     }
 
-    /// Takes what is ready without waiting: rejections first, then pick answers, then the
-    /// newest frame.
+    /// Takes what is ready without waiting: rejections first, then pick answers, progress,
+    /// then the newest frame.
     pub fn try_next(&self) -> Option<ServerMsg> {
         let mut s = self.slots();
         if let Some(r) = s.rejected.pop_front() {
@@ -131,6 +147,9 @@ impl SessionOutput {
         }
         if let Some(p) = s.picked.pop_front() {
             return Some(ServerMsg { msg: Some(server_msg::Msg::Picked(p)) });
+        }
+        if !s.progress.is_empty() {
+            return Some(ServerMsg { msg: Some(server_msg::Msg::Progress(s.progress.remove(0))) });
         }
         s.frame.take().map(|f| ServerMsg { msg: Some(server_msg::Msg::Frame(f)) })
     }
@@ -206,6 +225,25 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, MAX_QUEUED_REJECTIONS);
+    }
+
+    #[test]
+    fn progress_is_latest_wins_per_stage_in_stage_order() {
+        let out = SessionOutput::new();
+        let p = |stage: &str, done| Progress { stage: stage.into(), done, total: 10, message: String::new() };
+        out.publish_frame(frame(1));
+        out.progress(p("workers", 0));
+        out.progress(p("edge trees", 3));
+        out.progress(p("workers", 1));
+        out.progress(p("edge trees", 4));
+        for (stage, done) in [("workers", 1), ("edge trees", 4)] {
+            match out.try_next().unwrap().msg {
+                Some(server_msg::Msg::Progress(q)) => assert_eq!((q.stage.as_str(), q.done), (stage, done)),
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(seq_of(out.try_next().unwrap()), 1);
+        assert!(out.try_next().is_none());
     }
 
     #[test]

@@ -87,6 +87,12 @@ pub struct BatchSpec<'a> {
 
 /// Turns the pixels the sampler chose into ray request batches through `cam`, recording
 /// each request in `ring`. `next_batch_id` and `seed` advance per batch.
+///
+/// The picks come in scan order; batch `b` of `n` takes every `n`-th pick starting at `b`,
+/// so every batch spreads over the whole image. Answers arrive batch by batch, and the
+/// first to arrive then already cover the whole frame: a session's first frame is coarse
+/// but complete instead of a band of the top rows, and after a fast move the newly exposed
+/// regions everywhere get their first samples at once.
 pub fn build_batches(
     picks: &[PixelRequest],
     cam: &CameraFrame,
@@ -96,9 +102,12 @@ pub fn build_batches(
     seed: &mut u64,
     out: &mut Vec<pb::RequestBatch>,
 ) {
-    for chunk in picks.chunks(spec.batch_size.max(1)) {
-        let requests = chunk
+    let batches = picks.len().div_ceil(spec.batch_size.max(1));
+    for b in 0..batches {
+        let requests = picks
             .iter()
+            .skip(b)
+            .step_by(batches)
             .map(|p| {
                 let (origin, dir) = cam.ray(p.sx, p.sy);
                 let id = ring.push([p.x, p.y], dir);
@@ -162,7 +171,10 @@ mod tests {
         let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4 };
         let (mut next, mut seed, mut out) = (7u64, 1u64, Vec::new());
         build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
-        assert_eq!(out.iter().map(|b| b.requests.len()).collect::<Vec<_>>(), vec![4, 4, 2]);
+        assert_eq!(out.iter().map(|b| b.requests.len()).collect::<Vec<_>>(), vec![4, 3, 3]);
+        // Interleaved: each batch takes every third pick.
+        assert_eq!(out[0].requests.iter().map(|r| r.pixel_x).collect::<Vec<_>>(), vec![0, 3, 6, 9]);
+        assert_eq!(out[1].requests.iter().map(|r| r.pixel_x).collect::<Vec<_>>(), vec![1, 4, 7]);
         assert_eq!(out.iter().map(|b| b.batch_id).collect::<Vec<_>>(), vec![7, 8, 9]);
         assert_eq!(next, 10);
         assert!(out[0].seed != out[1].seed);

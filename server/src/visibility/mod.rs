@@ -150,6 +150,11 @@ impl Visibility {
         self.obj[i]
     }
 
+    /// Per pixel, the object whose surface covers the pixel centre, or [`NO_OBJECT`].
+    pub fn objects(&self) -> &[u32] {
+        &self.obj
+    }
+
     /// Whether a triangle covers the centre of pixel `i`.
     #[inline]
     pub fn covered(&self, i: usize) -> bool {

@@ -117,6 +117,7 @@ fn scene_of(meshes: Vec<Mesh>) -> Scene {
         camera: Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 },
         ambient: Vec3::ZERO,
         background: Vec3::ZERO,
+        orbit: None,
     }
 }
 
