@@ -476,6 +476,8 @@ async fn run_headless(
     Ok(())
 }
 
+// The window needs the session, its start, the script, the recorder and the flags.
+#[allow(clippy::too_many_arguments)]
 fn run_window(
     rt: &tokio::runtime::Runtime,
     window: ViewerWindow,

@@ -307,7 +307,7 @@ impl Ui {
                     return; // released before the answer came
                 }
                 if p.hit {
-                    let pos = glam::Vec3::from(p.position.clone().unwrap_or_default());
+                    let pos = glam::Vec3::from(p.position.unwrap_or_default());
                     tracing::info!(object = %p.name, id = p.object_id, "picked '{}' at {pos}", p.name);
                     self.notice(format!("moving {}", p.name));
                 } else {
@@ -477,7 +477,7 @@ impl Ui {
                 Some(f) => lines.push(format!("frame {}: waiting for the first samples", f.sequence)),
                 None => lines.push("waiting for the first frame".into()),
             }
-            let lines: Vec<String> = lines.iter().flat_map(|l| wrap(&[l.clone()], cols)).collect();
+            let lines: Vec<String> = lines.iter().flat_map(|l| wrap(std::slice::from_ref(l), cols)).collect();
             let y = c.panel(8, 8, &lines, WHITE) + 12;
             // One bar per stage with a known total.
             for (i, p) in self.progress.values().filter(|p| p.total > 0).enumerate() {
@@ -505,7 +505,7 @@ impl Ui {
             c.panel(4, top, &lines, DIM);
         }
         self.notices.retain(|(_, t)| t.elapsed() < NOTICE);
-        let notices: Vec<String> = self.notices.iter().flat_map(|(n, _)| wrap(&[n.clone()], cols)).collect();
+        let notices: Vec<String> = self.notices.iter().flat_map(|(n, _)| wrap(std::slice::from_ref(n), cols)).collect();
         if !notices.is_empty() {
             c.panel(4, h.saturating_sub(notices.len() * LINE + 10), &notices, WHITE);
         }
@@ -591,7 +591,7 @@ mod tests {
         let mut u = ui();
         let mut buf = Vec::new();
         assert_eq!(u.compose(&mut buf), (512, 512), "before any frame: the loading screen");
-        assert!(buf.iter().any(|&p| p == 0xffffff), "loading text drawn");
+        assert!(buf.contains(&0xffffff), "loading text drawn");
         u.receive(ToWindow::Progress(pb::Progress { stage: "workers".into(), done: 1, total: 2, message: "scene loaded".into() }));
         u.receive(ToWindow::Frame(frame(false)));
         assert_eq!(u.compose(&mut buf), (200, 150));
@@ -599,7 +599,7 @@ mod tests {
         u.receive(ToWindow::Frame(frame(true)));
         u.compose(&mut buf);
         // The stats panel darkens the top-left corner and writes over it; the rest is the frame.
-        assert!(buf[..200 * 12].iter().any(|&p| p == 0xffffff) && buf[5 * 200 + 5] != 0x808080);
+        assert!(buf[..200 * 12].contains(&0xffffff) && buf[5 * 200 + 5] != 0x808080);
         assert_eq!(buf[149 * 200 + 199], 0x808080);
         u.show_stats = false;
         u.compose(&mut buf);
