@@ -13,6 +13,7 @@ pub mod builtin;
 pub mod camera;
 pub mod data;
 pub mod error;
+pub mod geometry;
 pub mod light;
 pub mod load;
 pub mod material;

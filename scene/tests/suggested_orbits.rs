@@ -4,60 +4,13 @@
 //! and is inside no closed object (brute force over all triangles, checked against each
 //! object's bounding box first), and the scene's main content projects into the frame.
 //! Loaded bare models orbit their framing target.
+use edgepoint_scene::geometry::{closest_on_triangle, ray_triangle};
 use edgepoint_scene::{builtin, data, Camera, Object, Orbit, Scene};
 use glam::Vec3;
 
 /// Clearance from every triangle, as a fraction of the orbit radius. Samples 1° apart are
 /// closer than half of it to each other, so the eye keeps a clearance between samples too.
 const CLEARANCE: f32 = 0.05;
-
-fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
-    // Ericson, Real-Time Collision Detection, 5.1.5.
-    let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a;
-    }
-    let bp = p - b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return a + ab * (d1 / (d1 - d3));
-    }
-    let cp = p - c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return a + ac * (d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    }
-    let denom = 1.0 / (va + vb + vc);
-    a + ab * (vb * denom) + ac * (vc * denom)
-}
-
-/// Ray–triangle crossing (Möller–Trumbore), t > 0.
-fn crosses(o: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> bool {
-    let (e1, e2) = (b - a, c - a);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-12 {
-        return false;
-    }
-    let s = o - a;
-    let u = s.dot(p) / det;
-    let q = s.cross(e1);
-    let v = d.dot(q) / det;
-    u >= 0.0 && v >= 0.0 && u + v <= 1.0 && e2.dot(q) / det > 0.0
-}
 
 fn world_triangles(o: &Object) -> impl Iterator<Item = [Vec3; 3]> + '_ {
     o.mesh.triangles.iter().map(|t| t.map(|i| o.transform.transform_point3(o.mesh.positions[i as usize])))
@@ -76,7 +29,7 @@ fn near_object(s: &Scene, i: usize, p: Vec3, clearance: f32) -> Option<(f32, boo
     let (mut dist, mut hits) = (f32::INFINITY, 0u32);
     for [a, b, c] in world_triangles(&s.objects[i]) {
         dist = dist.min((closest_on_triangle(p, a, b, c) - p).length());
-        hits += crosses(p, dir, a, b, c) as u32;
+        hits += ray_triangle(p, dir, a, b, c).is_some() as u32;
     }
     Some((dist, hits % 2 == 1))
 }

@@ -77,6 +77,13 @@ pub struct SessionSender {
 }
 
 impl SessionSender {
+    /// A sender tied to no stream: what it sends comes out of the returned receiver (for
+    /// testing what a front end sends).
+    pub fn detached() -> (SessionSender, mpsc::UnboundedReceiver<pb::ViewerMsg>) {
+        let (tx, rx) = mpsc::unbounded_channel();
+        (SessionSender { tx }, rx)
+    }
+
     /// Sends any viewer message.
     pub fn send(&self, msg: viewer_msg::Msg) -> Result<(), ClientError> {
         self.tx.send(pb::ViewerMsg { msg: Some(msg) }).map_err(|_| ClientError::Closed)

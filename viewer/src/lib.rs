@@ -11,13 +11,16 @@
 //! - [`camera_path`]: `--camera`, camera path files (read, write), `--orbit` parameters.
 //! - [`camera_control`]: the camera the window's mouse and keys move.
 //! - [`script`]: scripted camera orbit or path and object slide, one step per frame.
-//! - [`window`]: an on-screen window (minifb) when a display exists.
+//! - [`window`]: the interactive on-screen window (minifb) when a display exists;
+//!   [`hud`] draws its text, [`object_drag`] moves picked objects.
 pub mod camera_control;
 pub mod camera_path;
 pub mod client;
 pub mod frame;
 pub mod headless;
+pub mod hud;
 pub mod local;
+pub mod object_drag;
 pub mod reconstruction;
 pub mod script;
 pub mod window;

@@ -4,19 +4,18 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, ValueEnum};
 use edgepoint_proto::{self as pb, FrameEncoding};
-use edgepoint_viewer::client::{camera_from_wire, camera_to_wire, code_name, SessionSender};
+use edgepoint_viewer::client::{camera_from_wire, code_name, SessionSender};
 use edgepoint_viewer::frame::{decode_frame, to_0rgb};
-use edgepoint_viewer::headless::{FrameMeter, HeadlessWriter};
+use edgepoint_viewer::headless::{FrameMeter, FrameStats, HeadlessWriter};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
-use edgepoint_viewer::camera_path::{parse_camera_spec, read_path, CameraSpec, OrbitArgs, PathWriter};
+use edgepoint_viewer::camera_path::{parse_camera_spec, read_path, suggested_orbit, CameraSpec, OrbitArgs, PathWriter};
 use edgepoint_viewer::script::{CameraPlan, Script, ScriptStep};
-use edgepoint_viewer::camera_control::{FreeCamera, DOLLY_PER_NOTCH};
-use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
+use edgepoint_viewer::window::{display_available, ShownFrame, ToWindow, ViewerWindow, WindowExit, WindowSetup, KEY_HELP};
 use edgepoint_viewer::{scene_source_from_arg_in, ConnectOptions, Event, ReconstructionArgs, SessionClient};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tokio::sync::watch;
@@ -28,12 +27,13 @@ const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
 ///
 /// Without --server, starts a local cluster: --workers shader workers and one server, as
 /// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
-/// without --headless, frames show in a window (Left/Right or A/D orbit, W/S or Up/Down
-/// dolly, Esc quits); otherwise each frame is written as OUT/frame_00001.png with one JSON
-/// line of stats per frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
-/// Logs go to stderr, filtered by RUST_LOG (default info). Ctrl-C ends the run cleanly.
+/// without --headless, frames show in a window that the mouse and keys drive (listed below;
+/// H or F1 shows them in the window); otherwise each frame is written as
+/// OUT/frame_00001.png with one JSON line of stats per frame in OUT/stats.jsonl (also
+/// printed on stdout unless --quiet). Logs go to stderr, filtered by RUST_LOG (default
+/// info). Ctrl-C ends the run cleanly.
 #[derive(Debug, Parser)]
-#[command(name = "edgepoint-viewer", version)]
+#[command(name = "edgepoint-viewer", version, after_help = KEY_HELP)]
 struct Args {
     /// Connect to a running edgepoint-server at URL (e.g. http://127.0.0.1:50051) instead
     /// of starting a local cluster.
@@ -156,6 +156,10 @@ struct Args {
     /// Start the --camera-path over at its end, forever.
     #[arg(long, requires = "camera_path")]
     loop_path: bool,
+
+    /// Directory the window's screenshot key (P) writes PNGs to.
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    screenshot_dir: PathBuf,
 
     /// Record the camera of every received frame (as the server reports it rendered the
     /// frame) to FILE, one JSON line per frame, in the format --camera-path plays.
@@ -362,7 +366,7 @@ fn run(args: Args) -> Result<()> {
         None
     };
     let result = match window {
-        Some(w) => run_window(&rt, w, client, script, recorder, &args, stop_flag),
+        Some(w) => run_window(&rt, w, client, &started, script, recorder, &args, stop_flag),
         None => {
             let out = args.out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUT_DIR));
             rt.block_on(run_headless(client, script, &mut recorder, &args, out, stop_rx))
@@ -472,10 +476,13 @@ async fn run_headless(
     Ok(())
 }
 
+// The window needs the session, its start, the script, the recorder and the flags.
+#[allow(clippy::too_many_arguments)]
 fn run_window(
     rt: &tokio::runtime::Runtime,
     window: ViewerWindow,
     mut client: SessionClient,
+    started: &pb::Started,
     script: Script,
     mut recorder: Option<PathWriter>,
     args: &Args,
@@ -486,41 +493,65 @@ fn run_window(
         None => None,
     };
     let sender = client.sender();
+    // Unbounded, so a pick answer or progress is never lost; decoded frames are skipped
+    // while two wait (the window shows only the newest).
+    let (to_window, from_session) = std::sync::mpsc::channel::<ToWindow>();
+    let queued = Arc::new(AtomicUsize::new(0));
+    let setup = WindowSetup {
+        sender: sender.clone(),
+        home: script.start_camera(),
+        scale: suggested_orbit(started).map(|o| o.radius).unwrap_or(1.0),
+        screenshot_dir: args.screenshot_dir.clone(),
+        scripted_camera: script.drives_camera(),
+        scene: args.scene.clone(),
+        frames_queued: queued.clone(),
+    };
     let script = Arc::new(Mutex::new(script));
-    // A short queue: the window shows only the newest frame, so a full queue means the
-    // window is busy and dropping a frame loses nothing.
-    let (frames_tx, frames_rx) = std::sync::mpsc::sync_channel::<ShownFrame>(4);
     let target = args.frames;
     let receiver = {
         let script = script.clone();
-        let sender = sender.clone();
+        let queued = queued.clone();
         rt.spawn(async move {
             let mut meter = FrameMeter::new();
             while let Some(ev) = client.next_event().await {
                 let received = Instant::now();
                 match ev? {
                     Event::Rejected(r) => log_rejected(&r),
-                    Event::Progress(p) => log_progress(&p),
-                    Event::Picked(_) => {}
+                    Event::Progress(p) => {
+                        log_progress(&p);
+                        let _ = to_window.send(ToWindow::Progress(p));
+                    }
+                    Event::Picked(p) => {
+                        let _ = to_window.send(ToWindow::Picked(p));
+                    }
                     Event::Frame(f) => {
                         let t0 = Instant::now();
                         let img = decode_frame(&f)?;
                         let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
                         record(&mut recorder, &f)?;
-                        let fps = match writer.as_mut() {
-                            Some(w) => w.write_decoded(&f, &img, received, decode_ms)?.fps,
-                            None => meter.arrive(received).fps,
+                        let stats = match writer.as_mut() {
+                            Some(w) => w.write_decoded(&f, &img, received, decode_ms)?,
+                            None => FrameStats::new(&f, meter.arrive(received)),
                         };
-                        let mut pixels = Vec::with_capacity(img.len() / 3);
-                        to_0rgb(&img, &mut pixels);
-                        let _ = frames_tx.try_send(ShownFrame {
-                            width: f.width,
-                            height: f.height,
-                            pixels,
-                            sequence: f.sequence,
-                            samples_used: f.samples_used,
-                            fps,
-                        });
+                        if queued.load(Ordering::Relaxed) < 2 {
+                            let mut pixels = Vec::with_capacity(img.len() / 3);
+                            to_0rgb(&img, &mut pixels);
+                            queued.fetch_add(1, Ordering::Relaxed);
+                            let _ = to_window.send(ToWindow::Frame(ShownFrame {
+                                width: f.width,
+                                height: f.height,
+                                pixels,
+                                sequence: f.sequence,
+                                samples_used: f.samples_used,
+                                fps: stats.fps,
+                                stages: stats.stages.0.clone(),
+                                total_ms: f.total_ms,
+                                camera: f.camera.as_ref().map(camera_from_wire),
+                                overlay: f.overlay,
+                                reconstruction: f.reconstruction,
+                                has_content: f.pixels.as_ref().is_some_and(|p| p.cache_points > 0),
+                            }));
+                        }
                         let count = writer.as_ref().map_or(meter.count(), |w| w.frames_written());
                         if target > 0 && count >= target {
                             return Ok(());
@@ -534,17 +565,7 @@ fn run_window(
             session_ended_early(count, target)
         })
     };
-    let mut free = script.lock().unwrap_or_else(|e| e.into_inner()).start_camera().map(|c| FreeCamera::new(c, 1.0));
-    let exit = window.run(frames_rx, &stop, |m| {
-        let mut s = script.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(cam) = free.as_mut() {
-            // Interactive control takes the camera over from an orbit or path.
-            s.stop_camera();
-            cam.orbit(m.yaw, 0.0);
-            cam.dolly(-m.dolly.log(DOLLY_PER_NOTCH));
-            let _ = sender.send_camera(camera_to_wire(&cam.camera()));
-        }
-    });
+    let exit = window.run(from_session, &stop, setup, || script.lock().unwrap_or_else(|e| e.into_inner()).stop_camera());
     match exit {
         WindowExit::FramesEnded => rt.block_on(receiver).context("the frame receiver panicked")?,
         WindowExit::Closed | WindowExit::Stopped => {

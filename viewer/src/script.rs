@@ -274,7 +274,7 @@ mod tests {
         assert_eq!(fov(s.first_step().camera), Some(30.0));
         assert!(!s.path_finished(None));
         let last = s.on_frame().camera;
-        assert_eq!(fov(last.clone()), Some(31.0));
+        assert_eq!(fov(last), Some(31.0));
         assert!(s.on_frame().camera.is_none(), "played once");
         let first = camera_to_wire(&camera_from_wire(started().camera.as_ref().unwrap()));
         assert!(!s.path_finished(Some(&first)), "a frame of an earlier camera");

@@ -26,6 +26,7 @@ fn help_mentions_every_flag() {
         "--cluster-log-file", "--scene", "--width", "--height", "--shader", "--shader-param", "--encoding",
         "--frames", "--out", "--headless", "--orbit", "--orbit-speed", "--orbit-pivot", "--orbit-radius",
         "--orbit-elevation", "--orbit-start", "--camera", "--camera-path", "--loop-path", "--record-path",
+        "--screenshot-dir",
         "--move-object", "--sparseness",
         "--max-fps", "--quiet",
     ] {
@@ -318,7 +319,7 @@ fn camera_flags_go_in_start_and_a_recorded_orbit_plays_back_and_stops_at_its_end
         "--record-path", rec.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let start_cam = mock.seen.lock().unwrap().starts[0].camera.clone().unwrap();
+    let start_cam = mock.seen.lock().unwrap().starts[0].camera.unwrap();
     assert!(start_cam.eye.is_none() && start_cam.target.is_none() && start_cam.fov_y_degrees == 70.0, "{start_cam:?}");
     let recorded = edgepoint_viewer::camera_path::read_path(&rec).unwrap();
     assert_eq!(recorded.len(), 6, "one camera per frame");

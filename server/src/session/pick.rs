@@ -3,10 +3,11 @@
 //! is taken into each object's space (direction not renormalised, so distances stay in
 //! world units), objects whose box it misses closer than the best hit so far are skipped,
 //! and the rest are tested triangle by triangle. A pick happens once per mouse press, so
-//! this needs no acceleration structure (the 871k-triangle dragon takes a few ms).
+//! this uses no acceleration structure.
 use super::settings::camera_to_wire;
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
+use edgepoint_scene::geometry::ray_triangle;
 use edgepoint_scene::{Camera, Scene};
 use glam::{Affine3A, Vec3};
 
@@ -17,30 +18,6 @@ pub struct PickHit {
     /// Distance along the (normalised) ray.
     pub distance: f32,
     pub position: Vec3,
-}
-
-/// Möller–Trumbore: the ray parameter of the hit with triangle (a, b, c), both sides.
-#[inline]
-pub fn ray_triangle(o: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<f32> {
-    let (e1, e2) = (b - a, c - a);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-20 {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let s = o - a;
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = e2.dot(q) * inv;
-    (t > 0.0).then_some(t)
 }
 
 /// Entry distance of the ray into box (lo, hi), if it meets it before `t_max`.

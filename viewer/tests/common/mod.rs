@@ -141,7 +141,7 @@ impl Renderer for Mock {
                     samples_requested: 12,
                     live_workers: 2,
                     pixels: Some(pb::PixelCounts { with_point: 7, ..Default::default() }),
-                    camera: camera.lock().unwrap().clone(),
+                    camera: *camera.lock().unwrap(),
                     ..Default::default()
                 };
                 if frames_tx.send(Ok(pb::ServerMsg { msg: Some(server_msg::Msg::Frame(frame)) })).await.is_err() {
@@ -158,7 +158,7 @@ impl Renderer for Mock {
             while let Ok(Some(m)) = inbound.message().await {
                 let Some(msg) = m.msg else { continue };
                 if let viewer_msg::Msg::Camera(c) = &msg {
-                    *camera_in.lock().unwrap() = Some(c.clone());
+                    *camera_in.lock().unwrap() = Some(*c);
                     if c.eye.as_ref().is_some_and(|e| !e.x.is_finite()) {
                         let r = pb::Rejected { code: 3, message: "camera eye is not finite".into() };
                         if let Some(tx) = tx.upgrade() {
