@@ -1,5 +1,6 @@
-//! Small exact geometry on triangles shared by the renderer (picking) and the tests that
-//! check geometry against brute force.
+//! Small exact geometry on triangles and boxes shared by the renderer (picking, world
+//! boxes of moved objects), the workers and the tests that check geometry against brute
+//! force.
 use glam::Vec3;
 
 /// Möller–Trumbore: the ray parameter `t > 0` where `o + t d` meets triangle (a, b, c),
@@ -77,4 +78,19 @@ mod tests {
         assert_eq!(closest_on_triangle(Vec3::new(2.0, -0.5, 0.0), a, b, c), b);
         assert!((closest_on_triangle(Vec3::new(1.0, 1.0, 0.0), a, b, c) - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);
     }
+}
+
+/// The eight corners of the box [`lo`, `hi`] (bit 0 of the index picks x, bit 1 y, bit 2 z).
+pub fn box_corners((lo, hi): (Vec3, Vec3)) -> [Vec3; 8] {
+    std::array::from_fn(|i| {
+        Vec3::new(if i & 1 == 0 { lo.x } else { hi.x }, if i & 2 == 0 { lo.y } else { hi.y }, if i & 4 == 0 { lo.z } else { hi.z })
+    })
+}
+
+/// The axis-aligned box around the box `b` transformed by `t` (an object's world box).
+pub fn transformed_box(t: &glam::Affine3A, b: (Vec3, Vec3)) -> (Vec3, Vec3) {
+    box_corners(b).iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), c| {
+        let w = t.transform_point3(*c);
+        (lo.min(w), hi.max(w))
+    })
 }

@@ -48,20 +48,7 @@ impl Scene {
     /// World-space bounding box of object `i` at its default transform.
     pub fn object_bounds(&self, i: usize) -> (Vec3, Vec3) {
         let o = &self.objects[i];
-        let (a, b) = o.mesh.bounds;
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for c in 0..8 {
-            let p = Vec3::new(
-                if c & 1 == 0 { a.x } else { b.x },
-                if c & 2 == 0 { a.y } else { b.y },
-                if c & 4 == 0 { a.z } else { b.z },
-            );
-            let w = o.transform.transform_point3(p);
-            lo = lo.min(w);
-            hi = hi.max(w);
-        }
-        (lo, hi)
+        crate::geometry::transformed_box(&o.transform, o.mesh.bounds)
     }
 
     /// World-space bounding box of all objects at their default transforms.

@@ -124,17 +124,9 @@ pub struct Hit {
     pub normal: Vec3,
 }
 
-fn world_box(a: &Affine3A, (lo, hi): (Vec3, Vec3)) -> Aabb {
-    let mut b = Aabb::empty();
-    for i in 0..8 {
-        let c = Vec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        b.extend(a.transform_point3a(c.into()));
-    }
-    b
+fn world_box(a: &Affine3A, b: (Vec3, Vec3)) -> Aabb {
+    let (lo, hi) = edgepoint_scene::geometry::transformed_box(a, b);
+    Aabb::new(lo.into(), hi.into())
 }
 
 impl Instances {

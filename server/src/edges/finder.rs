@@ -454,20 +454,8 @@ impl EdgeFinder {
 }
 
 /// World box of an object-space box.
-pub fn world_box(t: &Affine3A, (lo, hi): (Vec3, Vec3)) -> (Vec3, Vec3) {
-    let mut a = Vec3::splat(f32::INFINITY);
-    let mut b = Vec3::splat(f32::NEG_INFINITY);
-    for i in 0..8 {
-        let c = Vec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        let w = t.transform_point3(c);
-        a = a.min(w);
-        b = b.max(w);
-    }
-    (a, b)
+pub fn world_box(t: &Affine3A, b: (Vec3, Vec3)) -> (Vec3, Vec3) {
+    edgepoint_scene::geometry::transformed_box(t, b)
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@ mod interpolate;
 mod reproject;
 
 use glam::Vec3;
+use rayon::prelude::*;
 use std::collections::VecDeque;
 
 /// Name of the stage (in [`crate::stage_times::StageTimes`]) that projects the points, keeps
@@ -62,6 +63,14 @@ pub struct GeometryCull<'a> {
     pub inverse_depth: &'a [f32],
 }
 
+/// Where a light emits from, as shadow tests need it: every emitting point lies within
+/// `radius` of `center` (a point light: radius 0; an area light: its bounding sphere).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightBound {
+    pub center: Vec3,
+    pub radius: f32,
+}
+
 /// One shaded point sample as the worker returned it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
@@ -75,6 +84,19 @@ pub struct Sample {
     pub epoch: u64,
     /// Pixel the sample was requested for.
     pub pixel: [u32; 2],
+}
+
+/// Whether the segment from `a` to `b` meets the box [`lo`, `hi`] (slab test).
+#[inline]
+pub fn segment_hits_box(a: Vec3, b: Vec3, lo: Vec3, hi: Vec3) -> bool {
+    let d = b - a;
+    let inv = d.recip();
+    let (t0, t1) = ((lo - a) * inv, (hi - a) * inv);
+    // A zero direction component gives ±infinity (or NaN exactly on a slab's plane, which
+    // `min`/`max` pass over), so the axis constrains nothing when `a` is inside its slab.
+    let tmin = t0.min(t1).max_element().max(0.0);
+    let tmax = t0.max(t1).min_element().min(1.0);
+    tmin <= tmax
 }
 
 /// Size and policy of a [`RenderCache`].
@@ -433,6 +455,42 @@ impl RenderCache {
         for r in &mut self.regions {
             r.free.sort_unstable_by(|a, b| b.cmp(a));
         }
+    }
+
+    /// Ages to [`STALE_AGE`] the hit points whose shading something occupying the world box
+    /// `region` may change (DESIGN.md "Motion", step 1 of a frame: an object moved from or
+    /// into `region`): those from which a shadow ray toward some light can pass through the
+    /// box. Conservative: the segment from the point to the light's centre is tested against
+    /// the box grown by the light's radius, which contains every ray from the point to the
+    /// light's emitting surface where it crosses the box. Their shading stays visible until
+    /// re-shaded; prioritized sampling re-shades stale points first. Returns the points aged.
+    pub fn age_shadowed_by(&mut self, region: (Vec3, Vec3), lights: &[LightBound]) -> u32 {
+        if lights.is_empty() || !(region.0.cmple(region.1).all()) {
+            return 0;
+        }
+        let stale_born = self.stale_born();
+        let p = &mut self.pool;
+        let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| (l.center, region.0 - Vec3::splat(l.radius), region.1 + Vec3::splat(l.radius))).collect();
+        const CHUNK: usize = 4096;
+        p.shade
+            .par_chunks_mut(CHUNK)
+            .zip(p.flags.par_chunks(CHUNK))
+            .zip(p.px.par_chunks(CHUNK).zip(p.py.par_chunks(CHUNK)).zip(p.pz.par_chunks(CHUNK)))
+            .map(|((shade, flags), ((xs, ys), zs))| {
+                let mut n = 0u32;
+                for k in 0..shade.len() {
+                    if flags[k] & (FLAG_VALID | FLAG_HIT) != FLAG_VALID | FLAG_HIT {
+                        continue;
+                    }
+                    let q = Vec3::new(xs[k], ys[k], zs[k]);
+                    if boxes.iter().any(|&(c, lo, hi)| segment_hits_box(q, c, lo, hi)) {
+                        shade[k].born = stale_born;
+                        n += 1;
+                    }
+                }
+                n
+            })
+            .sum()
     }
 
     /// Gives every point maximal age ([`STALE_AGE`]): its shading may have changed (e.g. a

@@ -617,3 +617,158 @@ fn results_do_not_depend_on_the_thread_count() {
         assert!(run(threads) == one, "{threads} threads differ from 1");
     }
 }
+
+#[test]
+fn segment_box_test_matches_dense_sampling_along_the_segment() {
+    let mut rng = Rng(41);
+    let (mut hits, mut misses) = (0, 0);
+    for _ in 0..4000 {
+        let lo = rng.vec3(-1.0, 0.5);
+        let hi = lo + rng.vec3(0.05, 1.0);
+        let (a, b) = (rng.vec3(-2.0, 2.0), rng.vec3(-2.0, 2.0));
+        // Points strictly inside the box along the segment prove a hit; staying clear of the
+        // box by a margin proves a miss.
+        let mut inside = false;
+        let mut near = false;
+        for k in 0..=2000 {
+            let p = a + (b - a) * (k as f32 / 2000.0);
+            let d = (lo - p).max(p - hi).max_element();
+            inside |= d < -1e-3;
+            near |= d < 1e-2;
+        }
+        let got = segment_hits_box(a, b, lo, hi);
+        if inside {
+            assert!(got, "{a} {b} in [{lo}, {hi}]");
+            hits += 1;
+        } else if !near {
+            assert!(!got, "{a} {b} clear of [{lo}, {hi}]");
+            misses += 1;
+        }
+    }
+    assert!(hits > 100 && misses > 1000, "{hits} hits, {misses} misses");
+    // Axis-parallel segments (zero direction components) and a segment starting inside.
+    assert!(segment_hits_box(Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.5, 0.5, 2.0), Vec3::ZERO, Vec3::ONE));
+    assert!(!segment_hits_box(Vec3::new(1.5, 0.5, -1.0), Vec3::new(1.5, 0.5, 2.0), Vec3::ZERO, Vec3::ONE));
+    assert!(segment_hits_box(Vec3::splat(0.5), Vec3::splat(5.0), Vec3::ZERO, Vec3::ONE));
+    assert!(!segment_hits_box(Vec3::new(0.5, 0.5, -3.0), Vec3::new(0.5, 0.5, -2.0), Vec3::ZERO, Vec3::ONE), "stops short");
+}
+
+#[test]
+fn moved_objects_carry_their_points_and_only_theirs() {
+    let mut rng = Rng(8);
+    let mut c = cache(16, 16, 2.0);
+    for _ in 0..300 {
+        let obj = (rng.next_u64() % 3) as u32;
+        c.insert(&at(hit(rng.vec3(-1.0, 1.0), rng.vec3(0.0, 1.0), obj), 0, (rng.next_u64() % 16) as u32));
+    }
+    c.insert(&at(miss(Vec3::Z, Vec3::ONE), 0, 0));
+    let before: Vec<Option<CachedPoint>> = (0..c.capacity() as u32).map(|i| c.point(i)).collect();
+    let from = glam::Affine3A::from_rotation_translation(glam::Quat::from_rotation_y(0.3), Vec3::new(1.0, 0.0, 0.0));
+    let to = glam::Affine3A::from_rotation_translation(glam::Quat::from_rotation_z(-0.7), Vec3::new(0.0, 2.0, -1.0));
+    let moved = c.move_object(1, &from, &to);
+    let mut n = 0;
+    for (i, b) in before.iter().enumerate() {
+        let (Some(b), Some(a)) = (b, c.point(i as u32)) else {
+            assert!(b.is_none() && c.point(i as u32).is_none());
+            continue;
+        };
+        if b.hit && b.object == 1 {
+            n += 1;
+            // The same point of the object: its object-space position is unchanged.
+            let want = to.transform_point3(from.inverse().transform_point3(b.position));
+            assert!((a.position - want).length() < 1e-5, "{} vs {want}", a.position);
+            assert_eq!(a.age, STALE_AGE, "shaded in the old place");
+        } else {
+            assert_eq!(a, *b, "other points stay");
+        }
+    }
+    assert_eq!(moved, n);
+    assert!(n > 50);
+}
+
+#[test]
+fn moves_age_exactly_the_points_a_box_can_shadow() {
+    let mut rng = Rng(12);
+    let mut c = cache(32, 32, 2.0);
+    for _ in 0..1500 {
+        c.insert(&at(hit(rng.vec3(-3.0, 3.0), Vec3::ONE, 0), 0, (rng.next_u64() % 32) as u32));
+    }
+    c.insert(&at(miss(Vec3::Y, Vec3::ONE), 0, 0));
+    let lights = [LightBound { center: Vec3::new(0.0, 6.0, 0.0), radius: 0.0 }, LightBound { center: Vec3::new(4.0, 4.0, 4.0), radius: 0.5 }];
+    let region = (Vec3::new(-0.5, 1.0, -0.5), Vec3::new(0.5, 1.5, 0.5));
+    let aged = c.age_shadowed_by(region, &lights);
+    let mut n = 0;
+    for i in 0..c.capacity() as u32 {
+        let Some(p) = c.point(i) else { continue };
+        let want = p.hit
+            && lights.iter().any(|l| segment_hits_box(p.position, l.center, region.0 - Vec3::splat(l.radius), region.1 + Vec3::splat(l.radius)));
+        assert_eq!(p.age == STALE_AGE, want, "{p:?}");
+        n += usize::from(want);
+    }
+    assert_eq!(aged as usize, n);
+    assert!(n > 20 && n < 1400, "{n} of 1500 aged");
+    assert_eq!(c.age_shadowed_by(region, &[]), 0);
+}
+
+#[test]
+fn stale_inserts_are_aged_and_fresh_ones_are_not() {
+    let mut c = cache(4, 4, 1.0);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 4, 4);
+    let grid = plane_points(&cam, 3.0);
+    for (i, p) in grid.iter().enumerate() {
+        assert!(c.insert_aged(&hit(*p, Vec3::ONE, 0), i % 2 == 0));
+    }
+    frame(&mut c, &cam);
+    let ages = &c.point_image().age;
+    assert_eq!(ages.iter().filter(|&&a| a == STALE_AGE).count(), 8);
+    assert_eq!(ages.iter().filter(|&&a| a == 1.0).count(), 8);
+}
+
+#[test]
+fn geometry_culls_hidden_points_and_misses_on_surfaces_wherever_they_land() {
+    // A wall at depth 4 and points at depth 4 (on it), 6 (behind it) and misses; the
+    // geometry covers the left half of the image only.
+    let (w, h) = (16u32, 8u32);
+    let cam = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let n = (w * h) as usize;
+    let covered = |i: usize| (i % w as usize) < 8;
+    let inverse_depth: Vec<f32> = (0..n).map(|i| if covered(i) { 0.25 } else { 0.0 }).collect();
+    let far3: Vec<f32> = (0..n)
+        .map(|i| {
+            let x = i % w as usize;
+            if x < 7 {
+                4.0
+            } else {
+                f32::INFINITY
+            }
+        })
+        .collect();
+    let mut c = cache(w, h, 4.0);
+    let on = plane_points(&cam, 4.0);
+    let behind = plane_points(&cam, 6.0);
+    for i in 0..n {
+        // One point per pixel: alternate surfaces so neighbours never show a point hidden.
+        let s = match i % 3 {
+            0 => hit(on[i], Vec3::ONE, 0),
+            1 => hit(behind[i], Vec3::ONE, 1),
+            _ => miss(on[i] - cam.eye, Vec3::ZERO),
+        };
+        c.insert(&at(s, (i % w as usize) as u32, (i / w as usize) as u32));
+    }
+    let g = GeometryCull { far3: &far3, inverse_depth: &inverse_depth };
+    c.reproject_points(&cam, Some(g), &mut StageTimes::new());
+    let pi = c.point_image();
+    for i in 0..n {
+        let x = i % w as usize;
+        let kept = pi.point[i] != NO_POINT;
+        let want = match i % 3 {
+            0 => true,   // on the surface
+            1 => x >= 7, // behind it: culled wherever every centre around shows it
+            // A miss on the surface goes; beside it, its neighbours decide (they are nearer
+            // on all sides here, which the neighbour test culls too).
+            _ if covered(i) => false,
+            _ => continue,
+        };
+        assert_eq!(kept, want, "pixel {i} (x {x}, kind {})", i % 3);
+    }
+}

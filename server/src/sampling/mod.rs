@@ -55,6 +55,11 @@ pub const PRIORITY_UNREACHED: f32 = 1.0;
 pub const PRIORITY_FRESH_POINT: f32 = 0.02;
 /// Priority of a pixel whose point reached `max_age_frames`.
 pub const PRIORITY_OLD_POINT: f32 = 0.3;
+/// Priority of a pixel whose point is stale ([`crate::render_cache::STALE_AGE`]): shaded
+/// before a change that can alter it (its object moved, or a moved object can shadow it).
+/// Above any merely old point, so that what a move changed is re-shaded first; below a
+/// pixel no sample reaches.
+pub const PRIORITY_STALE_POINT: f32 = 0.6;
 
 /// Priority of one pixel (see the module doc). `weight` is the un-normalised interpolation
 /// weight, `age` the age of the pixel's point in frames (`f32::INFINITY` if it has none).
@@ -63,6 +68,8 @@ pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
     let weight = if weight.is_finite() { weight.max(0.0) } else { 0.0 };
     if age.is_nan() || age == f32::INFINITY {
         PRIORITY_UNREACHED / (1.0 + weight)
+    } else if age >= crate::render_cache::STALE_AGE {
+        PRIORITY_STALE_POINT
     } else {
         let a = if max_age_frames > 0.0 { (age.max(0.0) / max_age_frames).min(1.0) } else { 1.0 };
         PRIORITY_FRESH_POINT + (PRIORITY_OLD_POINT - PRIORITY_FRESH_POINT) * a

@@ -24,13 +24,14 @@ use crate::encode::{effective_encoding, encode_frame};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
-use crate::render_cache::{CacheConfig, FrameCounts, RenderCache, Sample};
+use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
 use crate::visibility::{Visibility, STAGE_VISIBILITY};
 use crate::workers::Dispatcher;
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
+use edgepoint_scene::geometry::transformed_box;
 use edgepoint_scene::{Camera, Scene};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -95,6 +96,11 @@ pub(super) struct FrameLoop {
     last_move_epoch: u64,
     /// Per object: its current object-to-world transform (for edge finding).
     transforms: Vec<glam::Affine3A>,
+    /// The lights as shadow tests see them.
+    lights: Vec<LightBound>,
+    /// The world boxes swept by recent moves (old and new place), with their epochs, newest
+    /// last: a sample shaded before a move whose box can shadow it arrives stale.
+    recent_moves: std::collections::VecDeque<(u64, (glam::Vec3, glam::Vec3))>,
     cache: RenderCache,
     /// The exact primary visibility of the frame: what reprojection culls against.
     visibility: Visibility,
@@ -157,6 +163,8 @@ impl FrameLoop {
             moved_at: vec![0; objects],
             last_move_epoch: 0,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
+            lights: p.scene.lights.iter().map(light_bound).collect(),
+            recent_moves: std::collections::VecDeque::new(),
             cache,
             visibility: Visibility::new(p.width, p.height),
             epi: Epi::new(p.width, p.height),
@@ -468,10 +476,17 @@ impl FrameLoop {
         let from = std::mem::replace(&mut self.transforms[id as usize], t);
         self.last_move_epoch = self.epoch;
         // The object's points go with it (their shading is aged: it was computed in the old
-        // place). Shadows and reflections on other objects may have changed too: age
-        // everything so it is re-sampled soon (DESIGN.md step 1, conservatively).
+        // place), and the points it can shadow, in its old place or its new one, are aged
+        // too (DESIGN.md "Motion"): prioritized sampling re-shades them first.
         self.cache.move_object(id, &from, &t);
-        self.cache.mark_stale();
+        let bounds = self.scene.objects[id as usize].mesh.bounds;
+        let (a, b) = (transformed_box(&from, bounds), transformed_box(&t, bounds));
+        let region = (a.0.min(b.0), a.1.max(b.1));
+        self.cache.age_shadowed_by(region, &self.lights);
+        if self.recent_moves.len() >= RECENT_MOVES {
+            self.recent_moves.pop_front();
+        }
+        self.recent_moves.push_back((self.epoch, region));
     }
 
     /// Drains answers from the workers into the cache; returns samples inserted.
@@ -495,6 +510,10 @@ impl FrameLoop {
                     if o >= objects {
                         self.counters.unmatched += 1;
                         continue;
+                    }
+                    // Shaded before a move that can shadow it: right place, stale shading.
+                    if b.epoch < self.last_move_epoch {
+                        stale = self.shadowed_since(b.epoch, position);
                     }
                     // The object moved after the sample was requested: the hit is carried to
                     // the object's current place (DESIGN.md "Motion"), its shading aged.
@@ -533,6 +552,18 @@ impl FrameLoop {
         }
         self.counters.samples_inserted += inserted as u64;
         inserted
+    }
+
+    /// Whether a point shaded at `epoch` may be shadowed differently now: a move since then
+    /// swept a box that a shadow ray from it can cross (or the moves since then are no
+    /// longer remembered).
+    fn shadowed_since(&self, epoch: u64, p: glam::Vec3) -> bool {
+        if self.recent_moves.front().is_none_or(|&(e, _)| e > epoch + 1) && epoch < self.last_move_epoch {
+            return true;
+        }
+        self.recent_moves.iter().filter(|&&(e, _)| e > epoch).any(|&(_, (lo, hi))| {
+            self.lights.iter().any(|l| segment_hits_box(p, l.center, lo - glam::Vec3::splat(l.radius), hi + glam::Vec3::splat(l.radius)))
+        })
     }
 
     /// Builds ray batches for the picked pixels and submits them; returns requests sent.
@@ -583,6 +614,20 @@ impl FrameLoop {
         }
     }
 }
+
+/// Moves whose swept boxes are remembered for samples that arrive after them.
+const RECENT_MOVES: usize = 64;
+
+/// A light as the shadow tests see it: every emitting point within a sphere.
+fn light_bound(l: &edgepoint_scene::Light) -> LightBound {
+    let center = l.center();
+    let radius = match l {
+        edgepoint_scene::Light::Point { .. } => 0.0,
+        edgepoint_scene::Light::Area { vertices, .. } => vertices.iter().map(|v| (*v - center).length()).fold(0.0, f32::max),
+    };
+    LightBound { center, radius }
+}
+
 
 /// Ring size: all requests that can be outstanding, twice over, so late answers still match.
 fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {

@@ -73,8 +73,9 @@ pub struct Visibility {
     verts: Vec<Vert>,
     offsets: Vec<usize>,
     drawn: Option<DrawnFor>,
-    /// Triangles drawn (not culled by the object test) in the last draw.
+    /// Triangles drawn (not culled by the object test) and pixels covered in the last draw.
     triangles: u64,
+    covered: u32,
 }
 
 /// Counts of one [`Visibility::update`].
@@ -102,6 +103,7 @@ impl Visibility {
             offsets: Vec::new(),
             drawn: None,
             triangles: 0,
+            covered: 0,
         }
     }
 
@@ -127,10 +129,10 @@ impl Visibility {
         let redrawn = self.drawn.as_ref() != Some(&key);
         if redrawn {
             self.draw(scene, transforms, cam);
+            self.covered = self.invz.par_iter().with_min_len(16 * 1024).filter(|&&v| v > 0.0).count() as u32;
             self.drawn = Some(key);
         }
-        let covered = self.invz.par_iter().with_min_len(16 * 1024).filter(|&&v| v > 0.0).count() as u32;
-        VisibilityCounts { redrawn, triangles: self.triangles, covered }
+        VisibilityCounts { redrawn, triangles: self.triangles, covered: self.covered }
     }
 
     /// Forgets the last draw, so the next [`Self::update`] draws again.
@@ -307,12 +309,7 @@ impl Proj {
         let m = self.view * *t;
         let (mut front, mut behind) = (0, 0);
         let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
-        for i in 0..8 {
-            let c = Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
+        for c in edgepoint_scene::geometry::box_corners((lo, hi)) {
             let v = self.vertex(m.transform_point3a(c.into()), near);
             if v.v[2] > near {
                 front += 1;
