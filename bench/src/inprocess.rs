@@ -71,8 +71,8 @@ impl Staged {
             triples.extend(shaded.triples.iter().map(|&[light, blocker, receiver]| TripleKey { light, blocker, receiver }));
             for (s, r) in shaded.samples.iter().zip(&requests) {
                 out.push(match s.hit {
-                    Some(h) => Sample { hit: true, position: h.position, color: s.rgb, object: h.object, epoch: 0, pixel: r.pixel },
-                    None => Sample { hit: false, position: r.direction, color: s.rgb, object: u32::MAX, epoch: 0, pixel: r.pixel },
+                    Some(h) => Sample { hit: true, position: h.position, normal: Vec3::ZERO, color: s.rgb, object: h.object, epoch: 0, pixel: r.pixel },
+                    None => Sample { hit: false, position: r.direction, normal: Vec3::ZERO, color: s.rgb, object: u32::MAX, epoch: 0, pixel: r.pixel },
                 });
             }
         }

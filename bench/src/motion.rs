@@ -60,11 +60,12 @@ pub struct MotionArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
     /// The path: `orbit` (the scene's suggested orbit, which stays inside the built-in
-    /// rooms, at --degrees-per-frame), `dolly` (toward the camera's target to 60 % of the
-    /// distance and back, 120 frames a cycle), `still`, `move-object:NAME` (NAME slides back
-    /// and forth along X, 25 % of the scene's width, 120 frames a cycle, camera still), or a
-    /// camera path file (one JSON camera per line, as `edgepoint-viewer --record-path`
-    /// writes).
+    /// rooms, at --degrees-per-frame; `--camera fov=` sets its lens), `dolly` (toward the
+    /// camera's target to 60 % of the distance and back, 120 frames a cycle), `still`,
+    /// `move-object:NAME` (NAME slides back and forth along X, 25 % of the scene's width, 120
+    /// frames a cycle, camera still), or a camera path file (one JSON camera per line, as
+    /// `edgepoint-viewer --record-path` writes). The still, dolly and object paths start
+    /// from the scene's camera with `--camera` over it.
     #[arg(long, default_value = "orbit")]
     pub path: String,
     /// Orbit step in degrees per frame (with `--path orbit`).
@@ -185,7 +186,10 @@ fn make_steps(args: &MotionArgs, started: &pb::Started, scene: &Scene) -> Result
     Ok(match p {
         "still" => still(base),
         "orbit" => {
-            let orbit = suggested_orbit(started)?;
+            let mut orbit = suggested_orbit(started)?;
+            if let Some(fov) = args.scene.camera.as_ref().and_then(|c| c.fov_y_degrees) {
+                orbit.fov_y_degrees = fov;
+            }
             (0..n).map(|k| Step { camera: orbit.camera_after(k as f32 * args.degrees_per_frame), moved: Vec::new() }).collect()
         }
         "dolly" => (0..n)
@@ -242,7 +246,8 @@ async fn record(
         shader_params: a.shader_params.iter().cloned().collect(),
         encoding: pb::FrameEncoding::Qoi as i32,
         settings: Some(settings),
-        camera: None,
+        // --camera over the scene's camera: the base of the still, dolly and object paths.
+        camera: a.camera.as_ref().map(|c| c.to_wire()),
     };
     let steps = match expected {
         Some(s) => s.to_vec(),

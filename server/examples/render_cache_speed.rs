@@ -70,8 +70,8 @@ fn trace(cam: &CameraFrame, sx: f32, sy: f32, pixel: [u32; 2]) -> Sample {
         hit = Some((p, n, Vec3::new(0.8, 0.3, 0.2) * (0.5 + 0.5 * n.dot(Vec3::new(0.3, 0.8, 0.5)).max(0.0)), 1));
     }
     match hit {
-        Some((position, _normal, color, object)) => Sample { hit: true, position, color, object, epoch: 0, pixel },
-        None => Sample { hit: false, position: d, color: Vec3::new(0.5, 0.7, 1.0), object: u32::MAX, epoch: 0, pixel },
+        Some((position, normal, color, object)) => Sample { hit: true, position, normal, color, object, epoch: 0, pixel },
+        None => Sample { hit: false, position: d, normal: Vec3::ZERO, color: Vec3::new(0.5, 0.7, 1.0), object: u32::MAX, epoch: 0, pixel },
     }
 }
 

@@ -114,6 +114,7 @@ impl ShaderWorker for ScriptedWorker {
                                 rgb: Some(Vec3::new(b.epoch as f32, t.len() as f32, x0).into()),
                                 triangle: 0,
                                 local_position: q.origin,
+                                local_normal: Some(Vec3::Z.into()),
                             })
                             .collect();
                         let out = pb::SampleBatch { batch_id: b.batch_id, epoch: b.epoch, samples, shade_ms: 0.1, ..Default::default() };

@@ -59,8 +59,8 @@ fn edge_and_point_beats_the_render_cache_from_the_same_samples() {
         }
         for (s, r) in shade_batch(&loaded, &inst, &spec, 2, &requests).samples.iter().zip(&requests) {
             samples.push(match s.hit {
-                Some(hit) => Sample { hit: true, position: hit.position, color: s.rgb, object: hit.object, epoch: 0, pixel: r.pixel },
-                None => Sample { hit: false, position: r.direction, color: s.rgb, object: u32::MAX, epoch: 0, pixel: r.pixel },
+                Some(hit) => Sample { hit: true, position: hit.position, normal: Vec3::ZERO, color: s.rgb, object: hit.object, epoch: 0, pixel: r.pixel },
+                None => Sample { hit: false, position: r.direction, normal: Vec3::ZERO, color: s.rgb, object: u32::MAX, epoch: 0, pixel: r.pixel },
             });
         }
         let mut cache = RenderCache::new(CacheConfig::new(w, h));

@@ -122,6 +122,8 @@ pub struct Hit {
     pub local: Vec3,
     /// Unit geometric normal (mesh winding), world space.
     pub normal: Vec3,
+    /// The same normal in the object's own coordinates.
+    pub local_normal: Vec3,
 }
 
 fn world_box(a: &Affine3A, b: (Vec3, Vec3)) -> Aabb {
@@ -172,8 +174,9 @@ impl Instances {
         let (object, slot, local) = best?;
         let t = top_hit.t;
         let o = &bvh.objects[object as usize];
-        let normal = (self.normal_to_world[object as usize] * o.normals[slot as usize]).normalize_or_zero();
-        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, local, normal: normal.into() })
+        let local_normal = o.normals[slot as usize];
+        let normal = (self.normal_to_world[object as usize] * local_normal).normalize_or_zero();
+        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, local, normal: normal.into(), local_normal: local_normal.into() })
     }
 
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.

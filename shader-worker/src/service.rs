@@ -169,6 +169,7 @@ fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64)
                     rgb: Some(s.rgb.into()),
                     triangle: h.triangle,
                     local_position: Some(h.local_position.into()),
+                    local_normal: Some(h.local_normal.into()),
                 },
                 None => pb::Sample { id: s.id, hit: false, rgb: Some(s.rgb.into()), object_id: u32::MAX, ..Default::default() },
             })

@@ -87,6 +87,8 @@ pub struct HitInfo {
     pub position: Vec3,
     /// The hit in the object's own coordinates.
     pub local_position: Vec3,
+    /// The unit normal in the object's own coordinates, facing the incoming ray.
+    pub local_normal: Vec3,
     /// Unit normal facing the incoming ray.
     pub normal: Vec3,
     pub object: u32,
@@ -228,7 +230,8 @@ fn shade_direct(
     if bad {
         rgb = Vec3::ZERO;
     }
-    let hit = HitInfo { position: h.position, local_position: h.local, normal: n, object: h.object, triangle: h.triangle, distance: h.t };
+    let local_normal = if front { h.local_normal } else { -h.local_normal }.normalize_or_zero();
+    let hit = HitInfo { position: h.position, local_position: h.local, local_normal, normal: n, object: h.object, triangle: h.triangle, distance: h.t };
     (SampleOut { id: r.id, hit: Some(hit), rgb }, triples, bad)
 }
 

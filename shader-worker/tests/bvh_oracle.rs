@@ -85,6 +85,8 @@ fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
                 // to the world hit.
                 let back = tf[g.object as usize].transform_point3(g.local);
                 assert!((back - g.position).length() < 1e-3 * r, "local {:?} -> {back:?} vs {:?}", g.local, g.position);
+                let n = (tf[g.object as usize].matrix3.inverse().transpose() * glam::Vec3A::from(g.local_normal)).normalize();
+                assert!(Vec3::from(n).dot(g.normal) > 0.9999, "local normal {:?} -> {n:?} vs {:?}", g.local_normal, g.normal);
                 assert!((g.normal.length() - 1.0).abs() < 1e-3);
                 // occlusion agrees on the same segment
                 assert!(inst.occluded(&loaded.bvh, o, d, 0.0, g.t * 1.001).is_some());

@@ -77,6 +77,9 @@ pub struct Sample {
     pub hit: bool,
     /// World hit point; for a miss: the unit ray direction (a point at infinity).
     pub position: Vec3,
+    /// Unit surface normal at a hit, facing the eye it was shaded for (zero: unknown, and for
+    /// a miss). The point is valid only while the eye stays on that side of its surface.
+    pub normal: Vec3,
     /// Linear RGB.
     pub color: Vec3,
     /// Object id, `u32::MAX` for a miss.
@@ -84,6 +87,18 @@ pub struct Sample {
     pub epoch: u64,
     /// Pixel the sample was requested for.
     pub pixel: [u32; 2],
+}
+
+/// A unit-range component as a 16-bit signed-normalised number.
+#[inline]
+fn snorm16(v: f32) -> i16 {
+    (v.clamp(-1.0, 1.0) * 32767.0).round() as i16
+}
+
+/// Inverse of [`snorm16`].
+#[inline]
+pub(crate) fn unorm(v: i16) -> f32 {
+    f32::from(v) * (1.0 / 32767.0)
 }
 
 /// Whether the segment from `a` to `b` meets the box [`lo`, `hi`] (slab test).
@@ -171,6 +186,8 @@ impl PointImage {
 pub struct CachedPoint {
     pub hit: bool,
     pub position: Vec3,
+    /// The normal as stored (16-bit components).
+    pub normal: Vec3,
     pub color: Vec3,
     pub object: u32,
     pub epoch: u64,
@@ -222,6 +239,11 @@ struct Pool {
     px: Vec<f32>,
     py: Vec<f32>,
     pz: Vec<f32>,
+    /// Surface normals facing the eye that sampled them, 16-bit signed-normalised per
+    /// component (6 bytes a point: only the side of the surface the eye is on is read).
+    nx: Vec<i16>,
+    ny: Vec<i16>,
+    nz: Vec<i16>,
     shade: Vec<Shade>,
     object: Vec<u32>,
     epoch: Vec<u64>,
@@ -287,6 +309,9 @@ impl RenderCache {
             px: vec![0.0; capacity],
             py: vec![0.0; capacity],
             pz: vec![0.0; capacity],
+            nx: vec![0; capacity],
+            ny: vec![0; capacity],
+            nz: vec![0; capacity],
             shade: vec![Shade::default(); capacity],
             object: vec![u32::MAX; capacity],
             epoch: vec![0; capacity],
@@ -360,6 +385,8 @@ impl RenderCache {
         }
         let pos = if s.hit { s.position } else { s.position.normalize() };
         (p.px[i], p.py[i], p.pz[i]) = (pos.x, pos.y, pos.z);
+        let n = if s.hit && s.normal.is_finite() { s.normal.normalize_or_zero() } else { Vec3::ZERO };
+        (p.nx[i], p.ny[i], p.nz[i]) = (snorm16(n.x), snorm16(n.y), snorm16(n.z));
         p.shade[i] = Shade { color: s.color, born };
         p.object[i] = s.object;
         p.epoch[i] = s.epoch;
@@ -554,6 +581,7 @@ impl RenderCache {
         Some(CachedPoint {
             hit: p.flags[i] & FLAG_HIT != 0,
             position: Vec3::new(p.px[i], p.py[i], p.pz[i]),
+            normal: Vec3::new(unorm(p.nx[i]), unorm(p.ny[i]), unorm(p.nz[i])),
             color: p.shade[i].color,
             object: p.object[i],
             epoch: p.epoch[i],
@@ -614,6 +642,7 @@ impl RenderCache {
         let d = glam::DAffine3::from_cols_array(&to.to_cols_array().map(f64::from))
             * glam::DAffine3::from_cols_array(&from.to_cols_array().map(f64::from)).inverse();
         let d = glam::Affine3A::from_cols_array(&d.to_cols_array().map(|v| v as f32));
+        let normal_matrix = glam::Mat3::from(d.matrix3).inverse().transpose();
         let stale_born = self.stale_born();
         let p = &mut self.pool;
         let mut moved = 0;
@@ -621,6 +650,8 @@ impl RenderCache {
             if p.object[i] == object && p.flags[i] & (FLAG_VALID | FLAG_HIT) == FLAG_VALID | FLAG_HIT {
                 let w = d.transform_point3(Vec3::new(p.px[i], p.py[i], p.pz[i]));
                 (p.px[i], p.py[i], p.pz[i]) = (w.x, w.y, w.z);
+                let n = (normal_matrix * Vec3::new(unorm(p.nx[i]), unorm(p.ny[i]), unorm(p.nz[i]))).normalize_or_zero();
+                (p.nx[i], p.ny[i], p.nz[i]) = (snorm16(n.x), snorm16(n.y), snorm16(n.z));
                 p.shade[i].born = stale_born;
                 moved += 1;
             }

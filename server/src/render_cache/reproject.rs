@@ -134,7 +134,8 @@ impl RenderCache {
             let n = proj.len();
             let r = base..base + n;
             let xyz = [&pool.px[r.clone()], &pool.py[r.clone()], &pool.pz[r.clone()]];
-            project_share(&prj, base, &pool.flags[r], xyz, proj, zbuf);
+            let n = [&pool.nx[r.clone()], &pool.ny[r.clone()], &pool.nz[r.clone()]];
+            project_share(&prj, base, &pool.flags[r], xyz, n, proj, zbuf);
         });
 
         // Merge the shares into zbufs[0] and take the nearest depth over each pixel and its
@@ -179,16 +180,18 @@ const BLOCK: usize = 256;
 /// [`Projector::project`], operation for operation, so the results are identical (the tests
 /// check the cache against it).
 #[inline(never)]
-fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], proj: &mut [Projected], zbuf: &mut [u64]) {
+fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], normals: [&[i16]; 3], proj: &mut [Projected], zbuf: &mut [u64]) {
     let w = prj.width as usize;
     let (wmax, hmax) = (prj.width as i64 - 1, prj.height as i64 - 1);
     let (e, r, u, f) = (prj.eye, prj.rx, prj.uy, prj.f);
     let (mut zs, mut sxs, mut sys) = ([0f32; BLOCK], [0f32; BLOCK], [0f32; BLOCK]);
+    let mut facing = [0f32; BLOCK];
     for (b, proj) in proj.chunks_mut(BLOCK).enumerate() {
         let start = b * BLOCK;
         let n = proj.len();
         let fl = &flags[start..start + n];
         let (bx, by, bz) = (&xyz[0][start..start + n], &xyz[1][start..start + n], &xyz[2][start..start + n]);
+        let (nx, ny, nz) = (&normals[0][start..start + n], &normals[1][start..start + n], &normals[2][start..start + n]);
         for k in 0..n {
             // 1 for a hit (subtract the eye), 0 for a miss direction.
             let hm = f32::from((fl[k] >> 1) & 1);
@@ -196,14 +199,19 @@ fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], p
             let z = x * f.x + y * f.y + zz * f.z;
             let inv = 1.0 / z;
             zs[k] = z;
+            // n · (p - eye): negative when the eye is on the side the point was shaded from
+            // (a zero normal, unknown side, or a miss gives zero and passes).
+            facing[k] = f32::from(nx[k]) * x + f32::from(ny[k]) * y + f32::from(nz[k]) * zz;
             sxs[k] = prj.cx + (x * r.x + y * r.y + zz * r.z) * inv;
             sys[k] = prj.cy - (x * u.x + y * u.y + zz * u.z) * inv;
         }
         for (k, pr) in proj.iter_mut().enumerate() {
             pr.pixel = NO_POINT;
             let (z, sx, sy) = (zs[k], sxs[k], sys[k]);
-            // Negated comparisons so that NaN is dropped too.
-            let visible = z > 1e-6 && sx >= 0.0 && sy >= 0.0 && sx < prj.wf && sy < prj.hf;
+            // Negated comparisons so that NaN is dropped too. A point whose surface turned
+            // away from the eye is hidden by that surface itself: it shows no more (its
+            // shading was computed for the other side), wherever it lands.
+            let visible = z > 1e-6 && sx >= 0.0 && sy >= 0.0 && sx < prj.wf && sy < prj.hf && facing[k] <= 0.0;
             if fl[k] & FLAG_VALID == 0 || !visible {
                 continue;
             }

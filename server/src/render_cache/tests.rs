@@ -8,11 +8,11 @@ use edgepoint_scene::camera::{Camera, CameraFrame};
 use crate::rng::Rng;
 
 fn hit(position: Vec3, color: Vec3, object: u32) -> Sample {
-    Sample { hit: true, position, color, object, epoch: 1, pixel: [0, 0] }
+    Sample { hit: true, position, normal: Vec3::ZERO, color, object, epoch: 1, pixel: [0, 0] }
 }
 
 fn miss(direction: Vec3, color: Vec3) -> Sample {
-    Sample { hit: false, position: direction.normalize(), color, object: u32::MAX, epoch: 1, pixel: [0, 0] }
+    Sample { hit: false, position: direction.normalize(), normal: Vec3::ZERO, color, object: u32::MAX, epoch: 1, pixel: [0, 0] }
 }
 
 /// The sample with the pixel it was shaded for.
@@ -771,4 +771,32 @@ fn geometry_culls_hidden_points_and_misses_on_surfaces_wherever_they_land() {
         };
         assert_eq!(kept, want, "pixel {i} (x {x}, kind {})", i % 3);
     }
+}
+
+#[test]
+fn points_whose_surface_turned_away_from_the_eye_are_not_shown() {
+    // A plane of points facing +z (toward the first eye); from behind it, none may show,
+    // from a grazing but still front side all may; points of unknown side always may.
+    let (w, h) = (16u32, 16u32);
+    let front = camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, w, h);
+    let mut c = cache(w, h, 2.0);
+    for (i, p) in plane_points(&front, 5.0).iter().enumerate() {
+        let mut s = at(hit(*p, Vec3::ONE, 0), i as u32 % w, i as u32 / w);
+        s.normal = Vec3::Z;
+        assert!(c.insert(&s));
+    }
+    let shown = |c: &mut RenderCache, eye: Vec3| {
+        let cam = camera(eye, Vec3::ZERO, w, h);
+        frame(c, &cam);
+        c.point_image().point.iter().filter(|&&p| p != NO_POINT).count()
+    };
+    assert!(shown(&mut c, Vec3::new(0.0, 0.0, 5.0)) > 200);
+    assert!(shown(&mut c, Vec3::new(3.0, 0.0, 4.0)) > 0, "seen from the front at an angle");
+    assert_eq!(shown(&mut c, Vec3::new(0.5, 0.2, -5.0)), 0, "seen from behind: the other side");
+    // A moved object's points turn with it: rotated half a turn about y, they face -z.
+    let half = glam::Affine3A::from_rotation_y(std::f32::consts::PI);
+    c.move_object(0, &glam::Affine3A::IDENTITY, &half);
+    assert!(shown(&mut c, Vec3::new(0.5, 0.2, -5.0)) > 200, "now the front");
+    let p = (0..c.capacity() as u32).find_map(|i| c.point(i)).unwrap();
+    assert!((p.normal - Vec3::NEG_Z).length() < 1e-3, "{}", p.normal);
 }

@@ -96,6 +96,8 @@ pub(super) struct FrameLoop {
     last_move_epoch: u64,
     /// Per object: its current object-to-world transform (for edge finding).
     transforms: Vec<glam::Affine3A>,
+    /// Per object: the matrix taking its normals to world space now.
+    normal_to_world: Vec<glam::Mat3A>,
     /// The lights as shadow tests see them.
     lights: Vec<LightBound>,
     /// The world boxes swept by recent moves (old and new place), with their epochs, newest
@@ -163,6 +165,7 @@ impl FrameLoop {
             moved_at: vec![0; objects],
             last_move_epoch: 0,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
+            normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
             lights: p.scene.lights.iter().map(light_bound).collect(),
             recent_moves: std::collections::VecDeque::new(),
             cache,
@@ -474,6 +477,7 @@ impl FrameLoop {
         }
         self.moved_at[id as usize] = self.epoch;
         let from = std::mem::replace(&mut self.transforms[id as usize], t);
+        self.normal_to_world[id as usize] = normal_matrix(&t);
         self.last_move_epoch = self.epoch;
         // The object's points go with it (their shading is aged: it was computed in the old
         // place), and the points it can shadow, in its old place or its new one, are aged
@@ -504,6 +508,7 @@ impl FrameLoop {
                     continue;
                 };
                 let mut position = pb::vec3_or_zero(&s.position);
+                let mut normal = glam::Vec3::ZERO;
                 let mut stale = false;
                 let object = if s.hit {
                     let o = s.object_id;
@@ -526,6 +531,8 @@ impl FrameLoop {
                         stale = true;
                         self.counters.carried += 1;
                     }
+                    // The side of the surface the sample was shaded from, as the object is now.
+                    normal = (self.normal_to_world[o as usize] * pb::vec3_or_zero(&s.local_normal)).normalize_or_zero();
                     o
                 } else {
                     // A background miss is a direction (DESIGN.md "Motion"); reprojection
@@ -536,6 +543,7 @@ impl FrameLoop {
                 let sample = Sample {
                     hit: s.hit,
                     position,
+                    normal,
                     color: pb::vec3_or_zero(&s.rgb),
                     object,
                     epoch: b.epoch,
@@ -613,6 +621,11 @@ impl FrameLoop {
             }
         }
     }
+}
+
+/// The matrix taking an object's normals to world space under `t`.
+fn normal_matrix(t: &glam::Affine3A) -> glam::Mat3A {
+    t.matrix3.inverse().transpose()
 }
 
 /// Moves whose swept boxes are remembered for samples that arrive after them.
