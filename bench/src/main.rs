@@ -18,9 +18,13 @@
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 //! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
+//! - `encode`: the frame's conversion to sRGB, QOI / raw encoding and publishing, against
+//!   the encoder before (kept in the bench as the baseline), one thread and all.
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
+mod clock;
 mod edges;
+mod encode;
 mod epi;
 mod frame;
 mod inprocess;
@@ -59,6 +63,8 @@ enum Cmd {
     Epi(epi::EpiArgs),
     /// PSNR/SSIM of edge-and-point vs Render Cache reconstruction from the same samples.
     Quality(quality::QualityArgs),
+    /// Frame encoding (sRGB, QOI, raw) and publishing against the previous encoder.
+    Encode(encode::EncodeArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -77,6 +83,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Reference(a) => frame::run_reference(a),
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
+        Cmd::Encode(a) => encode::run(a),
         Cmd::Edges(a) => edges::run(a),
     }
 }
