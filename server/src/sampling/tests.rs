@@ -191,6 +191,7 @@ fn scaling_meets_the_budget_with_saturated_pixels() {
 /// its buffer pixel by pixel), the oracle of the optimised [`Sampler::select`]. Row sums are
 /// added up in row order, as the optimised one does (the first version added them in the
 /// order rayon's reduction happened to split the rows).
+#[allow(clippy::too_many_arguments)]
 fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages: &[f32], cfg: &SamplingConfig, budget: usize) -> Vec<PixelRequest> {
     let (w, h) = (w as usize, h as usize);
     let n = w * h;
