@@ -7,6 +7,7 @@
 //! pixel holds a sample, the steady state of the interactive renderer). The Render Cache's
 //! own gap-filling interpolation and the per-pixel (paper-style) reachability are timed on the
 //! same frame as baselines.
+use crate::clock::{thread_cpu_ms, wall_ms};
 use crate::inprocess::{cache_with, jittered_picks, Staged};
 use crate::stats::median;
 use anyhow::{bail, Result};
@@ -19,7 +20,6 @@ use edgepoint_server::stage_times::StageTimes;
 use glam::{Affine3A, Vec3};
 use serde_json::json;
 use std::collections::{BTreeMap, HashMap};
-use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 pub struct EpiArgs {
@@ -148,20 +148,6 @@ pub fn run(args: EpiArgs) -> Result<()> {
     writeln!(table, "  B/px = bytes per pixel of the EPI's image-sized structures (--json: the breakdown, and the content-sized ones)")?;
     crate::emit(args.json, &json!({ "scene": args.scene, "iterations": args.iterations, "interpolation_simd": format!("{simd:?}"), "runs": runs }), &table);
     Ok(())
-}
-
-/// Milliseconds of CPU time of the calling thread.
-fn thread_cpu_ms() -> f64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: a valid clock id and a valid pointer to a timespec.
-    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
-}
-
-/// Milliseconds of wall-clock time since the first call.
-fn wall_ms() -> f64 {
-    static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
-    START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
 }
 
 struct Run {

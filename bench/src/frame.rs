@@ -43,6 +43,10 @@ pub struct SceneArgs {
     /// Threads per worker process (default: the worker's choice, all cores).
     #[arg(long)]
     pub worker_threads: Option<usize>,
+    /// Niceness added to the worker processes, so that the server's frame loop gets the
+    /// shared cores first (0 = same priority as the server).
+    #[arg(long, default_value_t = edgepoint_viewer::local::WORKER_NICE)]
+    pub worker_nice: i32,
     /// Shader name.
     #[arg(long, default_value = "direct")]
     pub shader: String,
@@ -110,6 +114,7 @@ pub(crate) fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
     LocalCluster::start(LocalOptions {
         workers: a.workers,
         worker_threads: a.worker_threads,
+        worker_nice: a.worker_nice,
         log_level: Some(std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into())),
         ..Default::default()
     })
@@ -253,6 +258,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             "height": a.height,
             "workers": a.workers,
             "worker_threads": a.worker_threads,
+            "worker_nice": a.worker_nice,
             "shader": a.shader,
             "frames": totals.len(),
             "session_start_ms": session_start_ms,

@@ -236,6 +236,25 @@ pub fn cache_with(width: u32, height: u32, cam: &CameraFrame, samples: &[Sample]
     cache
 }
 
+/// A frame as a session reconstructs it: the scene's brute-force edges, a Render Cache
+/// holding `samples`, the edge-and-point reconstruction (with the complex filter). The
+/// cache's image and filter weights are the frame's.
+pub fn reconstructed_frame(staged: &Staged, cam: &CameraFrame, samples: &[Sample]) -> RenderCache {
+    let (w, h) = (cam.width, cam.height);
+    let scene = &staged.loaded.scene;
+    let transforms: Vec<glam::Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+    let mut edges = Vec::new();
+    edgepoint_server::edges::brute::scene_edges(scene, &transforms, cam.eye, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+    let mut cache = cache_with(w, h, cam, samples, scene.background);
+    let mut epi = edgepoint_server::epi::Epi::new(w, h);
+    let mut times = StageTimes::new();
+    epi.build(&edges, cam, cache.point_image(), true, &mut times);
+    let background = cache.background();
+    let (points, image, weights) = cache.reconstruction_target();
+    epi.reconstruct(points, background, &Default::default(), true, image, weights, &mut times);
+    cache
+}
+
 /// Writes a linear-RGB image as an sRGB PNG.
 pub fn write_png(path: &Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
     let mut bytes = Vec::with_capacity(linear.len() * 3);

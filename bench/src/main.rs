@@ -18,13 +18,18 @@
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 //! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
+//! - `encode`: the frame's conversion to sRGB, QOI / raw encoding and publishing, against
+//!   the encoder before (kept in the bench as the baseline), one thread and all.
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
 //! - `motion`: quality in motion — every frame of a scripted path (orbit, dolly, object
 //!   slide, camera path file) against the converged reference of its exact state: PSNR,
 //!   SSIM, outlier pixels, the moved object's coverage, frames to fill newly exposed
 //!   regions; edge-and-point and Render Cache side by side.
+
+mod clock;
 mod edges;
+mod encode;
 mod epi;
 mod frame;
 mod inprocess;
@@ -67,6 +72,8 @@ enum Cmd {
     /// Quality in motion: a session along an orbit, dolly, object slide or camera path,
     /// every frame against the converged reference of its exact state.
     Motion(motion::MotionArgs),
+    /// Frame encoding (sRGB, QOI, raw) and publishing against the previous encoder.
+    Encode(encode::EncodeArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -85,6 +92,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Reference(a) => frame::run_reference(a),
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
+        Cmd::Encode(a) => encode::run(a),
         Cmd::Edges(a) => edges::run(a),
         Cmd::Motion(a) => motion::run(a),
     }

@@ -26,67 +26,23 @@ pub fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
-/// Lookup tables for exact 8-bit encoding without a `powf` per channel: `mid[k]` is the
-/// linear value at the rounding boundary between codes k-1 and k; `coarse` maps a linear
-/// value quantised to 1/COARSE to the largest code whose boundary lies at or below it,
-/// from which at most a few steps up along `mid` reach the exact code.
-struct SrgbTables {
-    mid: [f32; 257],
-    coarse: Vec<u8>,
-    to_linear: [f32; 256],
-}
-
-const COARSE: usize = 4096;
-
-fn tables() -> &'static SrgbTables {
-    static T: OnceLock<SrgbTables> = OnceLock::new();
-    T.get_or_init(|| {
-        let mut mid = [0.0f32; 257];
-        mid[0] = f32::NEG_INFINITY;
-        for (k, m) in mid.iter_mut().enumerate().take(256).skip(1) {
-            *m = srgb_to_linear((k as f32 - 0.5) / 255.0);
-        }
-        mid[256] = f32::INFINITY;
-        let mut coarse = vec![0u8; COARSE + 1];
-        let mut code = 0usize;
-        for (i, c) in coarse.iter_mut().enumerate() {
-            let x = i as f32 / COARSE as f32;
-            while code < 255 && mid[code + 1] <= x {
-                code += 1;
-            }
-            *c = code as u8;
-        }
-        let mut to_linear = [0.0f32; 256];
-        for (k, l) in to_linear.iter_mut().enumerate() {
-            *l = srgb_to_linear(k as f32 / 255.0);
-        }
-        SrgbTables { mid, coarse, to_linear }
-    })
-}
-
-#[inline]
-fn encode_channel(t: &SrgbTables, x: f32) -> u8 {
-    // NaN and negatives go to 0, values above 1 to 255.
-    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
-    let mut code = t.coarse[(x * COARSE as f32) as usize] as usize;
-    while code < 255 && t.mid[code + 1] <= x {
-        code += 1;
-    }
-    code as u8
-}
-
-/// Linear RGB (clamped to [0, 1]) to 8-bit sRGB, rounded to the nearest code in the encoded
-/// domain (what `round(255 * linear_to_srgb(x))` gives, without a `powf` per channel).
+/// Linear RGB (clamped to [0, 1]) to 8-bit sRGB, correctly rounded in the encoded domain
+/// (what `round(255 * linear_to_srgb(x))` gives in exact arithmetic), by table:
+/// [`crate::srgb`].
 #[inline]
 pub fn linear_to_srgb8(c: Vec3) -> [u8; 3] {
-    let t = tables();
-    [encode_channel(t, c.x), encode_channel(t, c.y), encode_channel(t, c.z)]
+    crate::srgb::encode_rgb(c)
+}
+
+fn to_linear_table() -> &'static [f32; 256] {
+    static T: OnceLock<[f32; 256]> = OnceLock::new();
+    T.get_or_init(|| std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0)))
 }
 
 /// 8-bit sRGB to linear RGB.
 #[inline]
 pub fn srgb8_to_linear(c: [u8; 3]) -> Vec3 {
-    let t = &tables().to_linear;
+    let t = to_linear_table();
     Vec3::new(t[c[0] as usize], t[c[1] as usize], t[c[2] as usize])
 }
 

@@ -18,6 +18,7 @@
 //!   dispatch with back-pressure, adaptive batch sizes, failure handling.
 //! - [`session`] — one render session per viewer: the frame loop thread.
 //! - [`encode`] — frame encodings (raw, QOI, PNG, JPEG).
+//! - [`srgb`] — exactly rounded linear to 8-bit sRGB by table.
 //! - [`reference`] — reference renders (1 spp and converged) through the workers.
 //! - [`service`] — the `Renderer` gRPC service.
 
@@ -32,6 +33,7 @@ pub mod reference;
 pub mod render_cache;
 pub mod rng;
 pub mod sampling;
+pub mod srgb;
 pub mod scenes;
 pub mod service;
 pub mod session;

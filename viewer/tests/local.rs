@@ -152,3 +152,28 @@ fn a_log_file_collects_the_childrens_stderr() {
         (0..2).all(|i| text.contains(&format!("[edgepoint-worker #{i}] worker starting on {}", addrs[i])))
     }));
 }
+
+/// Niceness of a process (field 19 of /proc/PID/stat).
+#[cfg(target_os = "linux")]
+fn niceness(pid: u32) -> i32 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // The command name (field 2) is in parentheses and may hold spaces: count after it.
+    let after = &stat[stat.rfind(')').unwrap() + 2..];
+    after.split(' ').nth(16).unwrap().parse().unwrap()
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn workers_run_below_the_server_priority() {
+    let dir = tempfile::tempdir().unwrap();
+    fake_bin_dir(dir.path(), fake_server_addr());
+    let me = niceness(std::process::id());
+    let c = LocalCluster::start(LocalOptions { worker_nice: 3, ..opts(dir.path(), 2) }).unwrap();
+    for i in 0..2 {
+        assert_eq!(niceness(c.pid(i).unwrap()), (me + 3).min(19), "worker {i}");
+    }
+    assert_eq!(niceness(c.server_pid().unwrap()), me, "the server keeps this process's priority");
+    drop(c);
+    let c = LocalCluster::start(LocalOptions { worker_nice: 0, ..opts(dir.path(), 1) }).unwrap();
+    assert_eq!(niceness(c.pid(0).unwrap()), me);
+}

@@ -213,6 +213,12 @@ impl Epi {
 
     /// Classification and encoding of every pixel from the boundary masks and the points.
     fn classify(&mut self, points: &PointImage) -> EpiCounts {
+        self.classify_isa(points, interpolate::Isa::detect())
+    }
+
+    /// [`Self::classify`] with the rows compiled for `isa` (which the CPU must have).
+    fn classify_isa(&mut self, points: &PointImage, isa: interpolate::Isa) -> EpiCounts {
+        assert!(isa.available(), "classification: this CPU lacks {isa:?}");
         let (w, words) = (self.width, self.flags.words);
         if w == 0 {
             return EpiCounts::default();
@@ -222,7 +228,12 @@ impl Epi {
             .par_chunks_mut(w)
             .zip(self.flags.planes.par_chunks_mut(Flags::PLANES * words))
             .enumerate()
-            .map(|(y, (px, fl))| classify_row(bounds, points, y, px, fl))
+            .map(|(y, (px, fl))| match isa {
+                // SAFETY: asserted above that the CPU has AVX2.
+                #[cfg(target_arch = "x86_64")]
+                interpolate::Isa::Avx2 | interpolate::Isa::Avx512 => unsafe { classify_row_avx2(bounds, points, y, px, fl) },
+                _ => classify_row(bounds, points, y, px, fl),
+            })
             .reduce(EpiCounts::default, |a, b| EpiCounts {
                 empty: a.empty + b.empty,
                 simple: a.simple + b.simple,
@@ -345,8 +356,28 @@ impl Epi {
     }
 }
 
+/// Bit `i` set where byte `i` is 1 (bytes are 0 or 1): eight bytes at a time, gathered into
+/// the top byte by one multiplication (each byte's bit lands on its own position, with no
+/// carries between them).
+#[inline(always)]
+fn pack_bits(bytes: &[u8; 64]) -> u64 {
+    let mut bits = 0u64;
+    for (k, c) in bytes.chunks_exact(8).enumerate() {
+        let v = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+        bits |= (v.wrapping_mul(0x0102_0408_1020_4080) >> 56) << (8 * k);
+    }
+    bits
+}
+
+/// [`classify_row`] compiled for AVX2: the empty words' loops vectorise eight wide.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn classify_row_avx2(bounds: &raster::Boundaries, points: &PointImage, y: usize, px: &mut [EpiPixel], fl: &mut [u64]) -> EpiCounts {
+    classify_row(bounds, points, y, px, fl)
+}
+
 /// Classifies and encodes row `y`: EPI pixels and flag planes.
-#[inline(never)]
+#[inline(always)]
 fn classify_row(bounds: &raster::Boundaries, points: &PointImage, y: usize, px: &mut [EpiPixel], fl: &mut [u64]) -> EpiCounts {
     let t = tables();
     let w = px.len();
@@ -362,64 +393,69 @@ fn classify_row(bounds: &raster::Boundaries, points: &PointImage, y: usize, px: 
         let x0 = 64 * j;
         let n = (w - x0).min(64);
         let mut planes = [0u64; Flags::PLANES];
-        let mut has_bits = 0u64;
-        for i in 0..n {
-            has_bits |= u64::from(pt[x0 + i] != NO_POINT) << i;
+        let (wpt, wsub, wpx) = (&pt[x0..x0 + n], &sub[x0..x0 + n], &mut px[x0..x0 + n]);
+        // Per pixel as bytes (straight loops that vectorise), then packed into bits.
+        let mut has = [0u8; 64];
+        for (h, &p) in has.iter_mut().zip(wpt) {
+            *h = u8::from(p != NO_POINT);
         }
+        let has_bits = pack_bits(&has);
         planes[Flags::HAS] = has_bits;
-        // No crossing on any side of the word's pixels: all empty, every sample usable.
-        let quiet = row[x0..=x0 + n].iter().fold(0, |a, &v| a | v) == 0 && below[x0..x0 + n].iter().fold(0, |a, &v| a | (v >> 8)) == 0;
-        if quiet {
-            for i in 0..n {
-                let has = (has_bits >> i) & 1 == 1;
-                px[x0 + i] = EpiPixel::new(code::EMPTY, if has { region(x0 + i) } else { 0 }, has, false);
+        // Pixels with a crossing on some side (top and left: the pixel's own vertex; right:
+        // the next vertex's vertical side; bottom: the vertex below's horizontal side).
+        let (wrow, wright, wbelow) = (&row[x0..x0 + n], &row[x0 + 1..x0 + n + 1], &below[x0..x0 + n]);
+        let mut cross = [0u8; 64];
+        for (k, ((&v, &r), &b)) in cross.iter_mut().zip(wrow.iter().zip(wright).zip(wbelow)) {
+            *k = u8::from((v | (r & 0xff) | (b >> 8)) != 0);
+        }
+        let crossed = pack_bits(&cross);
+        // Every pixel as an empty one first, in a straight loop without branches (it
+        // vectorises; the region is computed for every pixel and kept where there is a
+        // point); then the few crossed pixels are classified one by one.
+        for ((p, &pt), &[u, v]) in wpx.iter_mut().zip(wpt).zip(wsub) {
+            let has = pt != NO_POINT;
+            let r = PIXEL.region_of(u, v);
+            *p = EpiPixel::new(code::EMPTY, if has { r } else { 0 }, has, false);
+        }
+        let empty_has = has_bits & !crossed;
+        planes[Flags::USABLE] = empty_has;
+        c.empty += n as u32 - crossed.count_ones();
+        c.usable_samples += empty_has.count_ones();
+        let mut rest = crossed;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let x = x0 + i;
+            let has = (has_bits >> i) & 1 == 1;
+            let m = code::pixel_mask((row[x] >> 8) as u8, row[x + 1] as u8, (below[x] >> 8) as u8, row[x] as u8);
+            let bit = 1u64 << i;
+            let code = PIXEL.classify(m);
+            let r = if has { region(x) } else { 0 };
+            let (usable, primary_b) = if has {
+                let side = t.pixel.side(code, r);
+                let usable = side != AMBIGUOUS;
+                (usable, if usable { side == SIDE_B } else { t.pixel.area_a(code) < 0.5 })
+            } else {
+                (false, t.pixel.area_a(code) < 0.5)
+            };
+            let p = EpiPixel::new(code, r, usable, primary_b);
+            px[x] = p;
+            if usable {
+                planes[Flags::USABLE] |= bit;
             }
-            planes[Flags::USABLE] = has_bits;
-            c.empty += n as u32;
-            c.usable_samples += has_bits.count_ones();
-        } else {
-            for i in 0..n {
-                let x = x0 + i;
-                let has = (has_bits >> i) & 1 == 1;
-                let m = code::pixel_mask((row[x] >> 8) as u8, row[x + 1] as u8, (below[x] >> 8) as u8, row[x] as u8);
-                let bit = 1u64 << i;
-                if m == 0 {
-                    px[x] = EpiPixel::new(code::EMPTY, if has { region(x) } else { 0 }, has, false);
-                    if has {
-                        planes[Flags::USABLE] |= bit;
+            if p.is_simple() {
+                planes[Flags::SIMPLE] |= bit;
+                c.simple += 1;
+                if has {
+                    if usable {
                         c.usable_samples += 1;
+                    } else {
+                        c.ambiguous_samples += 1;
                     }
-                    c.empty += 1;
-                    continue;
                 }
-                let code = PIXEL.classify(m);
-                let r = if has { region(x) } else { 0 };
-                let (usable, primary_b) = if has {
-                    let side = t.pixel.side(code, r);
-                    let usable = side != AMBIGUOUS;
-                    (usable, if usable { side == SIDE_B } else { t.pixel.area_a(code) < 0.5 })
-                } else {
-                    (false, t.pixel.area_a(code) < 0.5)
-                };
-                let p = EpiPixel::new(code, r, usable, primary_b);
-                px[x] = p;
-                if usable {
-                    planes[Flags::USABLE] |= bit;
-                }
-                if p.is_simple() {
-                    planes[Flags::SIMPLE] |= bit;
-                    c.simple += 1;
-                    if has {
-                        if usable {
-                            c.usable_samples += 1;
-                        } else {
-                            c.ambiguous_samples += 1;
-                        }
-                    }
-                } else {
-                    planes[Flags::COMPLEX] |= bit;
-                    c.complex += 1;
-                }
+            } else {
+                planes[Flags::COMPLEX] |= bit;
+                c.complex += 1;
             }
         }
         for (p, v) in planes.into_iter().enumerate() {

@@ -130,3 +130,56 @@ fn a_cornell_frame_has_mostly_empty_pixels_and_times_every_stage() {
     let per_pixel: usize = epi.memory().iter().chain(&epi.memory_content()).map(|m| m.1).sum();
     assert!((per_pixel as f64) / (n as f64) < 16.0, "{} B/px: {:?} {:?}", per_pixel as f64 / n as f64, epi.memory(), epi.memory_content());
 }
+
+/// Classification pixel by pixel, straight from the definitions (§4.1–4.4): the oracle of
+/// [`Epi::classify`], whose words without crossings take a shortcut and whose rows are
+/// compiled for the CPU's vector width.
+#[test]
+fn classification_equals_the_per_pixel_definition_on_every_isa() {
+    use super::testutil::{random_epi, random_points, Rng};
+    let t = tables();
+    let mut rng = Rng(41);
+    for (w, h, density, long, short) in [(1, 1, 1.0, 1, 0), (70, 9, 0.8, 3, 4), (130, 40, 0.3, 6, 12), (64, 64, 1.0, 0, 0), (200, 17, 0.05, 9, 30)] {
+        let points = random_points(w, h, density, &mut rng);
+        let mut epi = random_epi(&points, long, short, true, &mut rng);
+        for isa in interpolate::Isa::ALL.into_iter().filter(|i| i.available()) {
+            let counts = epi.classify_isa(&points, isa);
+            let mut want = EpiCounts::default();
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    let has = points.point[i] != NO_POINT;
+                    let [u, v] = points.subpixel[i];
+                    let r = if has { code::PIXEL.region_of(u, v) } else { 0 };
+                    let m = epi.boundaries().mask(x, y);
+                    let (p, simple, complex) = if m == 0 {
+                        want.empty += 1;
+                        want.usable_samples += has as u32;
+                        (EpiPixel::new(code::EMPTY, r, has, false), false, false)
+                    } else {
+                        let c = code::PIXEL.classify(m);
+                        let side = if has { t.pixel.side(c, r) } else { AMBIGUOUS };
+                        let usable = has && side != AMBIGUOUS;
+                        let primary_b = if usable { side == SIDE_B } else { t.pixel.area_a(c) < 0.5 };
+                        let p = EpiPixel::new(c, r, usable, primary_b);
+                        if p.is_simple() {
+                            want.simple += 1;
+                            want.usable_samples += usable as u32;
+                            want.ambiguous_samples += (has && !usable) as u32;
+                        } else {
+                            want.complex += 1;
+                        }
+                        (p, p.is_simple(), !p.is_simple())
+                    };
+                    let at = format!("{isa:?}: pixel ({x},{y}) of {w}x{h}");
+                    assert_eq!(epi.pixels()[i], p, "{at}");
+                    let f = epi.flags();
+                    assert_eq!(f.get(x, y, Flags::HAS), has, "{at}");
+                    assert_eq!(f.get(x, y, Flags::USABLE), p.usable(), "{at}");
+                    assert_eq!((f.get(x, y, Flags::SIMPLE), f.get(x, y, Flags::COMPLEX)), (simple, complex), "{at}");
+                }
+            }
+            assert_eq!(counts, want, "{isa:?}: {w}x{h}");
+        }
+    }
+}

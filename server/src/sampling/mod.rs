@@ -76,6 +76,24 @@ pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
     }
 }
 
+/// The sum of a row's priorities in f64: four partial sums over the columns `x % 4`,
+/// added pairwise (four independent additions per step instead of one long chain).
+#[inline]
+pub fn row_sum(row: &[f32]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let chunks = row.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for k in 0..4 {
+            acc[k] += c[k] as f64;
+        }
+    }
+    for (k, &p) in rest.iter().enumerate() {
+        acc[k] += p as f64;
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3])
+}
+
 /// Picks the pixels to shade each frame.
 pub struct Sampler {
     width: u32,
@@ -84,9 +102,16 @@ pub struct Sampler {
     frame: u64,
     /// Per pixel priority of this frame (before scaling to the budget).
     prio: Vec<f32>,
+    /// Per row: the sum of its priorities (summed in row order into the frame's total, so
+    /// the total does not depend on how the rows were split among threads).
+    row_sums: Vec<f64>,
     /// Diffused error of the current and the next row (one guard cell each side).
     err_cur: Vec<f32>,
     err_next: Vec<f32>,
+    /// The row being dithered, in scan (logical) order: scaled priority, and scaled
+    /// priority plus the error diffused into it from the row before.
+    row_q: Vec<f32>,
+    row_a: Vec<f32>,
 }
 
 use crate::rng::mix64;
@@ -119,8 +144,11 @@ impl Sampler {
             seed,
             frame: 0,
             prio: vec![0.0; n],
+            row_sums: vec![0.0; height as usize],
             err_cur: vec![0.0; width as usize + 2],
             err_next: vec![0.0; width as usize + 2],
+            row_q: vec![0.0; width as usize],
+            row_a: vec![0.0; width as usize],
         }
     }
 
@@ -166,20 +194,22 @@ impl Sampler {
             return;
         }
         let max_age = cfg.max_age_frames;
-        let (total, max) = self
+        // Priorities in one straight loop per row (it vectorises), then the row's sum (see
+        // `row_sum`) and its maximum.
+        let max = self
             .prio
             .par_chunks_mut(w)
-            .enumerate()
-            .map(|(y, row)| {
-                let (mut s, mut m) = (0.0f64, 0.0f32);
-                for (x, p) in row.iter_mut().enumerate() {
-                    *p = priority(weights[y * w + x], ages[y * w + x], max_age);
-                    s += *p as f64;
-                    m = m.max(*p);
+            .zip(weights.par_chunks(w).zip(ages.par_chunks(w)))
+            .zip(self.row_sums.par_iter_mut())
+            .map(|((row, (wr, ar)), sum)| {
+                for ((p, &wt), &age) in row.iter_mut().zip(wr).zip(ar) {
+                    *p = priority(wt, age, max_age);
                 }
-                (s, m)
+                *sum = row_sum(row);
+                row.iter().fold(0.0f32, |m, &p| m.max(p))
             })
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)));
+            .reduce(|| 0.0, f32::max);
+        let total = self.row_sums.iter().sum::<f64>();
         let scale = self.scale_to_budget(total, max, budget as f64);
         self.dither(frame, scale, budget, out);
     }
@@ -240,8 +270,21 @@ impl Sampler {
         for ly in 0..h {
             let y = (ly + oy) % h;
             let left_to_right = (ly % 2 == 0) != flip;
+            // The row in scan order (logical column lx is physical column (lx + ox) % w),
+            // scaled and capped, plus the error diffused into it: straight loops off the
+            // scan's critical path.
             let row = &self.prio[y * w..(y + 1) * w];
-            let mut scan = RowScan { row, scale, y, ox, cur: &self.err_cur, next: &mut self.err_next, rng: &mut rng, budget, out };
+            let (head, tail) = self.row_q.split_at_mut(w - ox);
+            for (q, &p) in head.iter_mut().zip(&row[ox..]) {
+                *q = (p * scale).min(1.0);
+            }
+            for (q, &p) in tail.iter_mut().zip(&row[..ox]) {
+                *q = (p * scale).min(1.0);
+            }
+            for ((a, &q), &c) in self.row_a.iter_mut().zip(&self.row_q).zip(&self.err_cur[1..]) {
+                *a = q + c;
+            }
+            let mut scan = RowScan { q: &self.row_q, a: &self.row_a, y, ox, next: &mut self.err_next, rng: &mut rng, budget, out };
             let (done, carry) = if left_to_right { scan.run::<true>() } else { scan.run::<false>() };
             if done {
                 return;
@@ -255,20 +298,21 @@ impl Sampler {
             self.err_next[w] += self.err_next[w + 1];
             self.err_next[0] = 0.0;
             self.err_next[w + 1] = 0.0;
+            // The scan writes every cell of the next row's buffer, so it needs no clearing.
             std::mem::swap(&mut self.err_cur, &mut self.err_next);
-            self.err_next.iter_mut().for_each(|e| *e = 0.0);
         }
     }
 }
 
-/// One row of the serpentine error diffusion. Error buffers are indexed by logical column + 1
-/// (guard cells at both ends); `x` is the physical column, the logical one shifted by `ox`.
+/// One row of the serpentine error diffusion, over the row in scan order. The next row's
+/// error buffer is indexed by logical column + 1 (guard cells at both ends).
 struct RowScan<'a> {
-    row: &'a [f32],
-    scale: f32,
+    /// Scaled, capped priorities.
+    q: &'a [f32],
+    /// The same plus the error diffused from the row before.
+    a: &'a [f32],
     y: usize,
     ox: usize,
-    cur: &'a [f32],
     next: &'a mut [f32],
     rng: &'a mut u64,
     budget: usize,
@@ -278,23 +322,30 @@ struct RowScan<'a> {
 impl RowScan<'_> {
     /// Scans the row (left to right when `LTR`). Returns whether the budget is reached and
     /// the error carried past the row's end.
+    ///
+    /// Only the carried error and the random stream are serial; the error pushed into the
+    /// next row is kept in registers for the two cells still receiving it and written once
+    /// per cell, with the same additions in the same order as adding into the buffer.
     #[inline(always)]
     fn run<const LTR: bool>(&mut self) -> (bool, f32) {
-        let w = self.row.len();
-        let mut x = if LTR { self.ox } else { (self.ox + w - 1) % w };
-        // The 7/16 share for the next pixel of the row, kept in a register.
+        let w = self.q.len();
+        // The 7/16 share for the next pixel of the row.
         let mut carry = 0.0f32;
+        // Partial errors of the next row's cells `lx + 2` / `lx + 1` behind and ahead (LTR:
+        // cells lx + 1 and lx + 2 of the buffer; RTL: lx + 1 and lx), zero before any share.
+        let (mut near, mut far) = (0.0f32, 0.0f32);
         let mut rng = *self.rng;
         for step in 0..w {
             let lx = if LTR { step } else { w - 1 - step };
-            let q = (self.row[x] * self.scale).min(1.0);
-            let v = q + self.cur[lx + 1] + carry;
+            let q = self.q[lx];
+            let v = self.a[lx] + carry;
             rng ^= rng >> 12;
             rng ^= rng << 25;
             rng ^= rng >> 27;
             let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
             let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
             let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
+                let x = if self.ox + lx >= w { self.ox + lx - w } else { self.ox + lx };
                 let h2 = mix64(hsh);
                 self.out.push(PixelRequest {
                     x: x as u32,
@@ -311,21 +362,20 @@ impl RowScan<'_> {
                 v
             };
             carry = e * (7.0 / 16.0);
-            let (ahead, behind) = if LTR { (lx + 2, lx) } else { (lx, lx + 2) };
-            self.next[behind] += e * (3.0 / 16.0);
-            self.next[lx + 1] += e * (5.0 / 16.0);
-            self.next[ahead] += e * (1.0 / 16.0);
-            x = if LTR {
-                if x + 1 == w {
-                    0
-                } else {
-                    x + 1
-                }
-            } else if x == 0 {
-                w - 1
-            } else {
-                x - 1
-            };
+            // The cell behind gets its last share (3/16) and is final; the middle one its
+            // second (5/16); the one ahead its first (1/16).
+            let behind = if LTR { lx } else { lx + 2 };
+            self.next[behind] = near + e * (3.0 / 16.0);
+            near = far + e * (5.0 / 16.0);
+            far = 0.0 + e * (1.0 / 16.0);
+        }
+        // The last two cells: LTR w and w + 1, RTL 1 and 0.
+        if LTR {
+            self.next[w] = near;
+            self.next[w + 1] = far;
+        } else {
+            self.next[1] = near;
+            self.next[0] = far;
         }
         *self.rng = rng;
         (false, carry)

@@ -188,3 +188,118 @@ fn scaling_meets_the_budget_with_saturated_pixels() {
         assert!((got - budget as f64).abs() <= 1e-3 * budget as f64 + 0.5, "case {case}: {got} for budget {budget}");
     }
 }
+
+/// The selection as first written (one plain loop per step, the next row's error added into
+/// its buffer pixel by pixel), the oracle of the optimised [`Sampler::select`]. Row sums are
+/// added up in row order, as the optimised one does (the first version added them in the
+/// order rayon's reduction happened to split the rows).
+#[allow(clippy::too_many_arguments)]
+fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages: &[f32], cfg: &SamplingConfig, budget: usize) -> Vec<PixelRequest> {
+    let (w, h) = (w as usize, h as usize);
+    let n = w * h;
+    let mut out = Vec::new();
+    let budget = budget.min(n);
+    let mut s = Sampler::new(w as u32, h as u32, seed);
+    if budget == 0 || budget == n {
+        s.frame = frame;
+        s.select(weights, ages, cfg, budget, &mut out);
+        return out;
+    }
+    let (mut total, mut max) = (0.0f64, 0.0f32);
+    for y in 0..h {
+        // Four partial sums over the columns x % 4, added pairwise (the sum's definition).
+        let mut part = [0.0f64; 4];
+        for x in 0..w {
+            let p = priority(weights[y * w + x], ages[y * w + x], cfg.max_age_frames);
+            s.prio[y * w + x] = p;
+            part[x % 4] += p as f64;
+            max = max.max(p);
+        }
+        total += (part[0] + part[1]) + (part[2] + part[3]);
+    }
+    let scale = s.scale_to_budget(total, max, budget as f64);
+    let frame_key = mix64(seed ^ mix64(frame));
+    let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
+    let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
+    let mut cur = vec![0.0f32; w + 2];
+    let flip = frame & 1 == 1;
+    let mut rng = frame_key | 1;
+    for ly in 0..h {
+        let y = (ly + oy) % h;
+        let ltr = (ly % 2 == 0) != flip;
+        let row = &s.prio[y * w..(y + 1) * w];
+        let mut next = vec![0.0f32; w + 2];
+        let mut x = if ltr { ox } else { (ox + w - 1) % w };
+        let mut carry = 0.0f32;
+        for step in 0..w {
+            let lx = if ltr { step } else { w - 1 - step };
+            let q = (row[x] * scale).min(1.0);
+            let v = q + cur[lx + 1] + carry;
+            rng ^= rng >> 12;
+            rng ^= rng << 25;
+            rng ^= rng >> 27;
+            let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
+            let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
+            let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
+                let h2 = mix64(hsh);
+                out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)) });
+                if out.len() == budget {
+                    return out;
+                }
+                v - 1.0
+            } else {
+                v
+            };
+            carry = e * (7.0 / 16.0);
+            let (ahead, behind) = if ltr { (lx + 2, lx) } else { (lx, lx + 2) };
+            next[behind] += e * (3.0 / 16.0);
+            next[lx + 1] += e * (5.0 / 16.0);
+            next[ahead] += e * (1.0 / 16.0);
+            x = if ltr { (x + 1) % w } else { (x + w - 1) % w };
+        }
+        next[if ltr { w } else { 1 }] += carry;
+        next[1] += next[0];
+        next[w] += next[w + 1];
+        next[0] = 0.0;
+        next[w + 1] = 0.0;
+        cur = next;
+    }
+    out
+}
+
+/// The optimised selection picks exactly the pixels and positions of the plain one, over
+/// successive frames of random priority images (sizes from one pixel up, budgets from one
+/// pick to saturation, images where scaling must water-fill).
+#[test]
+fn select_equals_the_plain_reference_bit_for_bit() {
+    let mut rng = Rng::new(2024);
+    let cfg = SamplingConfig::default();
+    let mut out = Vec::new();
+    for case in 0..60u64 {
+        let (w, h) = if case < 4 { (1 + case as u32, 1) } else { (1 + (rng.next_u64() % 150) as u32, 1 + (rng.next_u64() % 90) as u32) };
+        let n = (w * h) as usize;
+        let saturating = case % 3 == 0;
+        let weights: Vec<f32> = (0..n).map(|_| if rng.next_u64().is_multiple_of(4) { 0.0 } else { rng.unit() * 3.0 }).collect();
+        let ages: Vec<f32> = (0..n)
+            .map(|_| {
+                if saturating || rng.next_u64().is_multiple_of(3) {
+                    f32::INFINITY
+                } else {
+                    (rng.next_u64() % 200) as f32
+                }
+            })
+            .collect();
+        let mut s = Sampler::new(w, h, case);
+        for frame in 0..4u64 {
+            let budget = match frame {
+                0 => 1,
+                1 => n / 64 + 1,
+                2 => n / 3 + 1,
+                _ => (rng.next_u64() % (n as u64 + 2)) as usize,
+            };
+            s.select(&weights, &ages, &cfg, budget, &mut out);
+            let want = reference_select(case, frame, w, h, &weights, &ages, &cfg, budget);
+            assert_eq!(out, want, "case {case} ({w}x{h}), frame {frame}, budget {budget}");
+        }
+    }
+}

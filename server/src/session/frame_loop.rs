@@ -20,7 +20,7 @@ use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
-use crate::encode::{effective_encoding, encode_frame};
+use crate::encode::{effective_encoding, FrameEncoder};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
@@ -120,6 +120,7 @@ pub(super) struct FrameLoop {
     ring: RequestRing,
     pub feedback: ShadingFeedback,
     times: StageTimes,
+    encoder: FrameEncoder,
     answers: Vec<pb::SampleBatch>,
     picks: Vec<PixelRequest>,
     batches: Vec<pb::RequestBatch>,
@@ -186,6 +187,7 @@ impl FrameLoop {
             ring,
             feedback: ShadingFeedback::new(objects),
             times: StageTimes::new(),
+            encoder: FrameEncoder::new(),
             answers: Vec::new(),
             picks: Vec::new(),
             batches: Vec::new(),
@@ -273,7 +275,7 @@ impl FrameLoop {
         }
 
         let t = Instant::now();
-        let data = match encode_frame(self.cache.image(), self.width, self.height, self.encoding) {
+        let data = match self.encoder.encode(self.cache.image(), self.width, self.height, self.encoding) {
             Ok(d) => d,
             Err(e) => {
                 tracing::error!("frame {} not sent: {e}", self.sequence);
