@@ -14,6 +14,7 @@ pub mod camera;
 pub mod data;
 pub mod error;
 pub mod light;
+pub mod limits;
 pub mod load;
 pub mod material;
 pub mod mesh;
