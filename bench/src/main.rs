@@ -18,11 +18,14 @@
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 //! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
+//! - `fuzz`: the scene-parser fuzz harness for as long as asked (findings go to the crash
+//!   corpus the tests replay).
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
 mod edges;
 mod epi;
 mod frame;
+mod fuzz;
 mod inprocess;
 mod load;
 mod loadtest;
@@ -33,6 +36,10 @@ mod stats;
 mod throughput;
 
 use clap::{Parser, Subcommand};
+
+/// Counts allocations for `fuzz` (off, one relaxed load per allocation, otherwise).
+#[global_allocator]
+static ALLOC: edgepoint_scene::alloc_count::CountingAlloc = edgepoint_scene::alloc_count::CountingAlloc;
 
 #[derive(Parser, Debug)]
 #[command(name = "edgepoint-bench", version, about = "Benchmarks for edgepoint (JSON output with --json)")]
@@ -59,6 +66,9 @@ enum Cmd {
     Epi(epi::EpiArgs),
     /// PSNR/SSIM of edge-and-point vs Render Cache reconstruction from the same samples.
     Quality(quality::QualityArgs),
+    /// Fuzz the scene parsers: mutated seed inputs; panics, slow parses and out-of-proportion
+    /// allocations are findings, kept in the crash corpus.
+    Fuzz(fuzz::FuzzArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -78,6 +88,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
         Cmd::Edges(a) => edges::run(a),
+        Cmd::Fuzz(a) => fuzz::run(a),
     }
 }
 

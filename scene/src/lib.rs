@@ -13,10 +13,12 @@
 // so a NaN never passes a validation by failing every comparison (issue 12 item 9).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod alloc_count;
 pub mod builtin;
 pub mod camera;
 pub mod data;
 pub mod error;
+pub mod fuzz;
 pub mod light;
 pub mod limits;
 pub mod load;
