@@ -72,13 +72,9 @@ enum Cmd {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
     let cli = Cli::parse();
+    // Fuzz inputs make the loaders warn by the thousand: only errors, unless RUST_LOG says.
+    edgepoint_proto::logging::init(if matches!(cli.cmd, Cmd::Fuzz(_)) { "error" } else { "warn" });
     match cli.cmd {
         Cmd::Frame(a) => frame::run(a),
         Cmd::Throughput(a) => throughput::run(a),

@@ -18,7 +18,7 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:50051";
 /// run. The server listens on 127.0.0.1 unless told otherwise; any other address needs TLS
 /// (--tls-cert/--tls-key) and viewer tokens (--token-file), or an explicit --insecure.
 #[derive(Parser, Debug, Clone)]
-#[command(name = "edgepoint-server", version)]
+#[command(name = "edgepoint-server", version, after_help = edgepoint_proto::shaders::help_text())]
 pub struct ServerArgs {
     /// Address to listen on (host:port; port 0 picks a free port). The bound address is
     /// printed on stdout as `listening <addr>`.
@@ -67,6 +67,14 @@ pub struct ServerArgs {
     /// refused with RESOURCE_EXHAUSTED.
     #[arg(long, value_name = "PIXELS", default_value_t = DEFAULT_MAX_FRAME_PIXELS, value_parser = clap::value_parser!(u64).range(1..=(1u64 << 28)))]
     pub max_frame_pixels: u64,
+
+    /// Memory all sessions together may take, in MiB (default: half of the machine's
+    /// memory). Each session's need is estimated at `start` from its image size (its
+    /// Render Cache, edge-and-point image and buffers: about 360 bytes per pixel with the
+    /// default --points-per-pixel 2); a session that does not fit in what is left is refused
+    /// with RESOURCE_EXHAUSTED, and so is a settings change that would outgrow it.
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(16..=(1u64 << 40)))]
+    pub max_memory_mib: Option<u64>,
 
     /// Seconds a viewer has to send `start` after opening a session (else DEADLINE_EXCEEDED).
     #[arg(long, value_name = "S", default_value_t = DEFAULT_START_TIMEOUT.as_secs(), value_parser = clap::value_parser!(u64).range(1..=3600))]

@@ -17,12 +17,7 @@ use std::time::Duration;
 const MAX_STREAMS_PER_CONNECTION: u32 = 64;
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    edgepoint_proto::logging::init("info");
     let cli = ServerArgs::parse();
     if !(cli.points_per_pixel.is_finite() && (0.25..=64.0).contains(&cli.points_per_pixel)) {
         eprintln!("error: --points-per-pixel must be in [0.25, 64], got {}", cli.points_per_pixel);
@@ -106,6 +101,11 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         .await?;
     }
 
+    let memory_limit = match cli.max_memory_mib {
+        Some(m) => m << 20,
+        None => edgepoint_server::session::memory::default_budget_bytes(),
+    };
+    tracing::info!(max_memory_mib = memory_limit >> 20, "session memory budget (--max-memory-mib)");
     let service = RendererService::new(
         pool,
         ServiceConfig {
@@ -115,6 +115,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
             max_message_bytes: max_message,
             tokens: tokens.clone(),
             start_timeout: Duration::from_secs(cli.start_timeout_secs),
+            memory: edgepoint_server::session::memory::MemoryBudget::new(memory_limit),
             metrics: metrics.sessions.clone(),
         },
     );

@@ -14,7 +14,7 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:50061";
 /// Kubernetes pod network restricted by a NetworkPolicy). On SIGTERM it finishes the batches
 /// it is shading, ends its streams (the renderer re-issues whatever was still queued) and exits.
 #[derive(Parser, Debug, Clone)]
-#[command(name = "edgepoint-worker", version)]
+#[command(name = "edgepoint-worker", version, after_help = edgepoint_proto::shaders::help_text())]
 pub struct WorkerArgs {
     /// Address to listen on (port 0 picks a free port; the bound address is printed on
     /// stdout as `listening <addr>`).

@@ -11,7 +11,6 @@ use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use edgepoint_viewer::script::{Script, ScriptStep};
 use edgepoint_viewer::window::{display_available, ShownFrame, ViewerWindow, WindowExit};
 use edgepoint_viewer::{scene_source_from_arg_in, ConnectOptions, Event, ReconstructionArgs, SessionClient};
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -31,7 +30,7 @@ const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
 /// line of stats per frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
 /// Logs go to stderr, filtered by RUST_LOG (default info). Ctrl-C ends the run cleanly.
 #[derive(Debug, Parser)]
-#[command(name = "edgepoint-viewer", version)]
+#[command(name = "edgepoint-viewer", version, after_help = edgepoint_proto::shaders::help_text())]
 struct Args {
     /// Connect to a running edgepoint-server at URL (e.g. http://127.0.0.1:50051) instead
     /// of starting a local cluster.
@@ -108,11 +107,12 @@ struct Args {
     #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: u32,
 
-    /// Shader the workers run for each sample (e.g. direct).
+    /// Shader the workers run for each sample (listed below).
     #[arg(long, value_name = "NAME", default_value = "direct")]
     shader: String,
 
-    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16); repeat for several.
+    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16; listed below); repeat for
+    /// several. The server refuses unknown ones and values out of range.
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
     shader_param: Vec<(String, f64)>,
 
@@ -216,14 +216,7 @@ fn parse_finite_f32(s: &str) -> Result<f32, String> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    edgepoint_proto::logging::init("info");
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

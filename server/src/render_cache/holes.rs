@@ -30,6 +30,22 @@ pub struct HoleFill {
 }
 
 impl HoleFill {
+    /// Bytes of the pyramid [`Self::new`] allocates for a `width` × `height` image.
+    pub fn bytes_for(width: u32, height: u32) -> usize {
+        let (w, h) = (width as usize, height as usize);
+        let (mut size, mut cells, mut levels) = (FINEST, 0usize, 0usize);
+        loop {
+            let (lw, lh) = (w.div_ceil(size).max(1), h.div_ceil(size).max(1));
+            cells += lw * lh;
+            levels += 1;
+            if lw == 1 && lh == 1 {
+                break;
+            }
+            size *= 2;
+        }
+        cells * std::mem::size_of::<[f32; 4]>() + levels.next_power_of_two().max(4) * std::mem::size_of::<Level>()
+    }
+
     pub fn new(width: u32, height: u32) -> Self {
         let (w, h) = (width as usize, height as usize);
         let mut levels = Vec::new();
