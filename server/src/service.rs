@@ -21,7 +21,7 @@ use crate::session::memory::{MemoryBudget, MemoryGrant, SessionMemory};
 use crate::session::{camera_from_wire, camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
 use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
-use edgepoint_proto::auth::{constant_time_eq, parse_bearer, AUTHORIZATION};
+use edgepoint_proto::auth::check_bearer;
 use edgepoint_proto::renderer_server::{Renderer, RendererServer};
 use edgepoint_proto::viewer_msg::Msg as ViewerIn;
 use std::collections::HashMap;
@@ -163,20 +163,7 @@ impl RendererService {
     /// Checks the viewer's bearer token when tokens are configured.
     fn authenticate(&self, md: &tonic::metadata::MetadataMap) -> Result<(), Status> {
         let Some(tokens) = &self.cfg.tokens else { return Ok(()) };
-        let Some(value) = md.get(AUTHORIZATION) else {
-            return Err(Status::unauthenticated(
-                "this server requires a bearer token: give the viewer --token-file FILE (or --token)",
-            ));
-        };
-        let value = value.to_str().map_err(|_| Status::unauthenticated("the authorization header is not ASCII"))?;
-        let token = parse_bearer(value).ok_or_else(|| Status::unauthenticated("the authorization header must be `Bearer <token>`"))?;
-        // Compare against every accepted token, so the time taken does not tell which matched.
-        let ok = tokens.iter().fold(false, |ok, t| ok | constant_time_eq(t, token));
-        if ok {
-            Ok(())
-        } else {
-            Err(Status::unauthenticated("invalid bearer token"))
-        }
+        check_bearer(md, tokens, "give the viewer --token-file FILE (or --token)")
     }
 
     /// Refuses frames above the pixel limit, or that could not fit in a message encoded.
@@ -542,7 +529,7 @@ mod tests {
         let md = |v: Option<&str>| {
             let mut m = tonic::metadata::MetadataMap::new();
             if let Some(v) = v {
-                m.insert(AUTHORIZATION, v.parse().unwrap());
+                m.insert(edgepoint_proto::auth::AUTHORIZATION, v.parse().unwrap());
             }
             m
         };

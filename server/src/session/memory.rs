@@ -140,15 +140,23 @@ impl Drop for MemoryGrant {
     }
 }
 
-/// The default budget: half of the machine's memory (the rest is for scenes, their edge
-/// indexes and everything else), or 8 GiB where it cannot be read.
+/// The default budget: half of the memory this process may use — the machine's, or its
+/// container's limit (cgroup v2 `memory.max` or v1 `memory.limit_in_bytes`) when smaller —
+/// leaving the rest for scenes, their edge indexes and everything else; 8 GiB where neither
+/// can be read.
 pub fn default_budget_bytes() -> u64 {
-    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|t| {
+    let machine = std::fs::read_to_string("/proc/meminfo").ok().and_then(|t| {
         t.lines().find_map(|l| l.strip_prefix("MemTotal:").and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok()))
     });
-    match total {
-        Some(kib) => kib * 1024 / 2,
-        None => 8 << 30,
+    let machine = machine.map(|kib| kib * 1024);
+    let container = ["/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"]
+        .iter()
+        .find_map(|p| std::fs::read_to_string(p).ok().and_then(|t| t.trim().parse::<u64>().ok()));
+    match (machine, container) {
+        (Some(m), Some(c)) => m.min(c) / 2,
+        (Some(m), None) => m / 2,
+        (None, Some(c)) => c / 2,
+        (None, None) => 8 << 30,
     }
 }
 
