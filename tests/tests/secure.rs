@@ -167,7 +167,7 @@ async fn tls_protects_the_viewer_port() {
     .expect("cluster starts");
     let port = cl.server_addr().port();
     let https = format!("https://localhost:{port}");
-    let good = ConnectOptions { token: Some(TOKEN.into()), tls_ca: Some(dir.0.join("ca.pem")), tls_domain: None };
+    let good = ConnectOptions { token: Some(TOKEN.into()), tls_ca: Some(dir.0.join("ca.pem")), ..Default::default() };
     let (mut c, _) = SessionClient::connect_with(&https, start_builtin("cornell", 64, 48), &good).await.expect("TLS session");
     let mut last = Instant::now();
     frames_until(&mut c, &mut last, WAIT, |_, s| s.samples > 0).await.unwrap();

@@ -20,6 +20,8 @@ use tokio::sync::watch;
 
 /// Output directory of a headless run when --out is not given.
 const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
+/// Frames of a headless run when --frames is not given.
+const DEFAULT_HEADLESS_FRAMES: u64 = 300;
 
 /// View frames from an edgepoint render server (edge-and-point rendering, Bala et al. 2003).
 ///
@@ -27,7 +29,8 @@ const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
 /// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
 /// without --headless, frames show in a window (Left/Right or A/D orbit, W/S or Up/Down
 /// dolly, Esc quits); otherwise each frame is written as OUT/frame_00001.png with one JSON
-/// line of stats per frame in OUT/stats.jsonl (also printed on stdout unless --quiet).
+/// line of stats per frame in OUT/stats.jsonl, 300 frames unless --frames says otherwise,
+/// and one summary line on stdout at the end (per-frame lines too with --stats-stdout).
 /// Logs go to stderr, filtered by RUST_LOG (default info). Ctrl-C ends the run cleanly.
 #[derive(Debug, Parser)]
 #[command(name = "edgepoint-viewer", version, after_help = edgepoint_proto::shaders::help_text())]
@@ -120,9 +123,11 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Encoding::Qoi)]
     encoding: Encoding,
 
-    /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    frames: u64,
+    /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed). Default:
+    /// 300 frames when headless (about 10 s at 30 fps, so a forgotten run cannot fill the
+    /// disk with PNGs), no limit with a window.
+    #[arg(long, value_name = "N")]
+    frames: Option<u64>,
 
     /// Write every frame as DIR/frame_00001.png ... and per-frame stats to DIR/stats.jsonl.
     /// Headless runs write to ./edgepoint-frames when not given; with a window, only when given.
@@ -157,9 +162,18 @@ struct Args {
     #[command(flatten)]
     reconstruction: ReconstructionArgs,
 
-    /// Do not print the per-frame stats lines on stdout (stats.jsonl is still written).
+    /// Print each frame's stats line (the JSON of stats.jsonl) on stdout as it arrives.
+    #[arg(long, conflicts_with = "quiet")]
+    stats_stdout: bool,
+
+    /// Print nothing on stdout, not even the summary line at the end (stats.jsonl is still
+    /// written).
     #[arg(long)]
     quiet: bool,
+
+    /// Seconds to wait for the server to answer `start` (it builds the scene first).
+    #[arg(long, value_name = "S", default_value_t = edgepoint_viewer::client::DEFAULT_START_TIMEOUT.as_secs(), value_parser = clap::value_parser!(u64).range(1..=86_400))]
+    start_timeout_secs: u64,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -265,6 +279,8 @@ fn run(args: Args) -> Result<()> {
                 log_file: args.cluster_log_file.clone(),
                 ..LocalOptions::default()
             };
+            // Under `cargo run`, build the server and worker first (cargo rebuilds what is stale).
+            edgepoint_viewer::local::build_under_cargo(args.bin_dir.as_deref())?;
             Some(LocalCluster::start(opts).context("starting the local cluster")?)
         }
     };
@@ -303,7 +319,12 @@ fn run(args: Args) -> Result<()> {
     if token.is_some() && args.server.is_none() {
         tracing::warn!("the token is not used: the local cluster takes none (give --server URL to use it)");
     }
-    let connect = ConnectOptions { token, tls_ca: args.tls_ca.clone(), tls_domain: args.tls_domain.clone() };
+    let connect = ConnectOptions {
+        token,
+        tls_ca: args.tls_ca.clone(),
+        tls_domain: args.tls_domain.clone(),
+        start_timeout: Some(std::time::Duration::from_secs(args.start_timeout_secs)),
+    };
     tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
     let connected = rt.block_on(async {
         let mut stop = stop_rx.clone();
@@ -372,11 +393,13 @@ fn log_rejected(r: &pb::Rejected) {
     tracing::warn!("the server rejected a message: {code}: {}", r.message);
 }
 
-fn session_ended_early(count: u64, target: u64) -> Result<()> {
-    if target > 0 && count < target {
+/// The server ended the stream: the viewer never asked for that (it stops by closing its
+/// side), so it is an error whatever the frame target.
+fn server_ended_session(count: u64, target: u64) -> Result<()> {
+    if target > 0 {
         bail!("the server ended the session after {count} of {target} frames");
     }
-    Ok(())
+    bail!("the server ended the session after {count} frames");
 }
 
 async fn run_headless(
@@ -386,7 +409,8 @@ async fn run_headless(
     out: PathBuf,
     mut stop: watch::Receiver<bool>,
 ) -> Result<()> {
-    let mut writer = HeadlessWriter::create(&out, !args.quiet)?;
+    let mut writer = HeadlessWriter::create(&out, args.stats_stdout)?;
+    let target = args.frames.unwrap_or(DEFAULT_HEADLESS_FRAMES);
     tracing::info!("writing frames and stats.jsonl to {}", out.display());
     let sender = client.sender();
     loop {
@@ -397,22 +421,23 @@ async fn run_headless(
         let received = Instant::now();
         match ev {
             None => {
-                session_ended_early(writer.frames_written(), args.frames)?;
-                break;
+                server_ended_session(writer.frames_written(), target)?;
             }
             Some(Err(e)) => return Err(e.into()),
             Some(Ok(Event::Rejected(r))) => log_rejected(&r),
             Some(Ok(Event::Progress(p))) => log_progress(&p),
             Some(Ok(Event::Frame(f))) => {
                 writer.write_frame(&f, received)?;
-                if args.frames > 0 && writer.frames_written() >= args.frames {
+                if target > 0 && writer.frames_written() >= target {
                     break;
                 }
                 send_step(&sender, script.on_frame());
             }
         }
     }
-    tracing::info!("wrote {} frames to {}", writer.frames_written(), out.display());
+    if !args.quiet {
+        println!("{}", writer.summary());
+    }
     Ok(())
 }
 
@@ -425,7 +450,7 @@ fn run_window(
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
     let mut writer = match &args.out {
-        Some(dir) => Some(HeadlessWriter::create(dir, !args.quiet)?),
+        Some(dir) => Some(HeadlessWriter::create(dir, args.stats_stdout)?),
         None => None,
     };
     let sender = client.sender();
@@ -433,7 +458,7 @@ fn run_window(
     // A short queue: the window shows only the newest frame, so a full queue means the
     // window is busy and dropping a frame loses nothing.
     let (frames_tx, frames_rx) = std::sync::mpsc::sync_channel::<ShownFrame>(4);
-    let target = args.frames;
+    let target = args.frames.unwrap_or(0);
     let receiver = {
         let script = script.clone();
         let sender = sender.clone();
@@ -472,7 +497,7 @@ fn run_window(
                 }
             }
             let count = writer.as_ref().map_or(meter.count(), |w| w.frames_written());
-            session_ended_early(count, target)
+            server_ended_session(count, target)
         })
     };
     let exit = window.run(frames_rx, &stop, |m| {
