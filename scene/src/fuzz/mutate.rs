@@ -50,7 +50,7 @@ const HOSTILE_WORDS: &[u64] = &[
     0x7f80_0000,          // f32 +inf
     0x7fc0_0000,          // f32 NaN
     0x7f7f_ffff,          // f32 max
-    0x0038_d7ea_4c68_000, // 1e15
+    0x0003_8d7e_a4c6_8000, // 1e15
     u64::MAX,
     0x7ff0_0000_0000_0000, // f64 +inf
     0x7ff8_0000_0000_0000, // f64 NaN
