@@ -53,8 +53,9 @@ pub struct SceneArgs {
     #[arg(long, default_value_t = 64)]
     pub reference_spp: u32,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
-    #[arg(long, default_value = "target/edgepoint-refs")]
-    pub ref_cache: PathBuf,
+    /// Default: $XDG_CACHE_HOME/edgepoint/references (else ~/.cache/edgepoint/references).
+    #[arg(long, value_name = "DIR")]
+    pub ref_cache: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -131,7 +132,7 @@ async fn references(
     let pool = WorkerPool::new(endpoints)?;
     let dispatcher = pool.open(source.clone(), hash.clone());
     let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
-    let cache = RefCache::new(&a.ref_cache);
+    let cache = RefCache::at(a.ref_cache.as_deref());
     let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp, &a.shader, &params);
     let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp) {
         Some(img) => (img, true),
