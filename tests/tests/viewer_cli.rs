@@ -47,11 +47,11 @@ fn viewer_with_a_missing_scene_file_fails_clearly() {
 /// saying the connection was lost (it used to print `UNKNOWN: h2 protocol error`).
 #[test]
 fn a_dying_server_is_reported_as_a_lost_connection() {
-    let mut cl = edgepoint_tests::cluster(1).expect("cluster starts");
+    let cl = edgepoint_tests::cluster(1).expect("cluster starts");
     let viewer = edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built");
     let out = std::env::temp_dir().join(format!("edgepoint-viewer-dies-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let mut child = Command::new(viewer)
+    let child = Command::new(viewer)
         .args(["--server", &cl.server_url(), "--headless", "--quiet", "--frames", "0", "--width", "32", "--height", "24"])
         .arg("--out")
         .arg(&out)

@@ -519,8 +519,6 @@ impl FrameLoop {
     }
 }
 
-/// Ring size: all requests that can be outstanding, twice over, so late answers still match.
-
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }

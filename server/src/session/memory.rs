@@ -52,8 +52,8 @@ impl SessionMemory {
     }
 }
 
-/// Requests the session must remember: twice what may be outstanding (frames of budget
-/// plus a batch), so an answer arriving late still finds its request.
+/// Ring size: all requests that can be outstanding (frames of budget plus a batch), twice
+/// over, so an answer arriving late still finds its request.
 pub fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
     2 * (s.frame_budget(pixels) * OUTSTANDING_FRAMES + s.batch_size as usize)
 }
