@@ -13,8 +13,8 @@
 //! checked in), which the tests replay along with the seeds, so a fixed bug stays fixed.
 //! An input whose parse aborts the process (a failed allocation of an impossible size)
 //! cannot be caught in-process; the input being parsed is kept in
-//! `fuzz/crashes/<target>/inflight.<ext>` while it runs, so it survives the abort, and the
-//! next run files it under `abort-<hash>`.
+//! `fuzz/crashes/<target>/.inflight.<ext>` (git-ignored) while it runs, so it survives the
+//! abort, and the next run files it under `abort-<hash>`.
 //!
 //! Entry points: `cargo test -p edgepoint-scene --test fuzz` (a fixed number of cases per
 //! target) and `edgepoint-bench fuzz --parser NAME --seconds N --json` (as long as asked).
@@ -225,7 +225,7 @@ impl Harness {
     }
 
     fn inflight_path(&self) -> PathBuf {
-        self.crash_dir.join(format!("inflight.{}", self.target.ext))
+        self.crash_dir.join(format!(".inflight.{}", self.target.ext))
     }
 
     /// Writes a finding's input into the crash corpus.
