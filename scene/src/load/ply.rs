@@ -2,10 +2,11 @@
 //! (any numeric type) and the `face` element's `vertex_indices` / `vertex_index` list (any
 //! count and index type); every other element and property is skipped by its declared type.
 //!
-//! Hostile headers are the danger here: every count the header or a list claims is checked
-//! against the bytes actually left before anything is reserved or looped over (a record
-//! takes at least [`Element::min_bytes`]), so a 121-byte file cannot ask for terabytes nor
-//! for 2^64 iterations. Data after the last declared element is an error, not ignored.
+//! Hostile headers are the danger here: no count the header or a list claims is trusted for
+//! a reservation beyond what the bytes left can hold (a record takes at least
+//! [`Element::min_bytes`]), and every record read consumes bytes or fails, so a 121-byte file
+//! can neither ask for terabytes nor for 2^64 iterations: it ends in a "truncated" error at
+//! the first missing record. Data after the last declared element is an error, not ignored.
 use crate::error::{Location, SceneError};
 use crate::limits::{check_coordinate, MAX_COORDINATE};
 use crate::Progress;
@@ -109,34 +110,15 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
             return Err(SceneError::file(name, "PLY `face` element has no `vertex_indices` list"));
         }
     }
-    // Every record takes some bytes: the counts must fit in what the file holds.
-    let available = body.len() as u64 + 1; // the last ASCII record may lack its line break
-    let mut needed = 0u64;
-    for e in &elements {
-        let min = e.min_bytes(format);
-        needed = needed.saturating_add(e.count.saturating_mul(min));
-        if needed > available {
-            return Err(SceneError::line(
-                name,
-                e.line,
-                format!(
-                    "element `{}` declares {} records, more than the {} bytes after the header can hold \
-                     (a record takes at least {min} bytes)",
-                    e.name,
-                    e.count,
-                    body.len()
-                ),
-            ));
-        }
-    }
-    if vertex.count >= u32::MAX as u64 {
-        return Err(SceneError::line(name, vertex.line, format!("{} vertices are more than a mesh can index (2^32 - 1)", vertex.count)));
-    }
+    // Counts are never trusted for a reservation beyond what the bytes after the header can
+    // hold (a record takes at least `min_bytes`), and every record read consumes bytes or
+    // fails, so a count larger than the file ends in a "truncated" error at the first record
+    // that is not there, never in a huge allocation or an endless loop.
+    let fits = |e: &Element| (body.len() as u64 + 1) / e.min_bytes(format).max(1);
     let total = elements.iter().fold(0u64, |t, e| t.saturating_add(e.count));
     progress.begin(&format!("parse {name}"), total);
     let mut r = Reader { data: body, pos: 0, base: data.len() - body.len(), format, line: header_lines + 1 };
-    // Bounded by the body size through the check above.
-    let mut positions = Vec::with_capacity(vertex.count as usize);
+    let mut positions = Vec::with_capacity(vertex.count.min(fits(vertex)) as usize);
     let mut triangles = Vec::new();
     let mut poly: Vec<u32> = Vec::with_capacity(8);
     let mut values = vec![0f64; vertex.props.len()];
@@ -148,6 +130,9 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
         }
         for i in 0..e.count {
             let at = |reason: String| SceneError::new(name, Location::Element(e.name.clone(), i as usize), reason);
+            if r.at_end() {
+                return Err(at(r.place(format!("the file ends here, but the header declares {} `{}` records (truncated)", e.count, e.name))));
+            }
             if e.name == "vertex" {
                 for (k, p) in e.props.iter().enumerate() {
                     match p {
@@ -158,6 +143,9 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                 for &k in &xyz {
                     check_coordinate(values[k], MAX_COORDINATE).map_err(|m| at(r.place(m)))?;
                 }
+                if positions.len() >= u32::MAX as usize - 1 {
+                    return Err(at(r.place("more vertices than a mesh can index (2^32 - 1)".into())));
+                }
                 positions.push(Vec3::new(values[xyz[0]] as f32, values[xyz[1]] as f32, values[xyz[2]] as f32));
             } else if e.name == "face" {
                 for p in &e.props {
@@ -167,7 +155,7 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                             poly.clear();
                             for _ in 0..count {
                                 let idx = r.scalar(*t).map_err(&at)?;
-                                if !(idx >= 0.0 && idx < vertex.count as f64 && idx.fract() == 0.0) {
+                                if !(idx >= 0.0 && idx < vertex.count.min(u32::MAX as u64 - 1) as f64 && idx.fract() == 0.0) {
                                     return Err(at(r.place(format!(
                                         "face refers to vertex {idx} but there are {} vertices",
                                         vertex.count
@@ -301,6 +289,11 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
+    /// Whether every byte has been read.
+    fn at_end(&self) -> bool {
+        self.pos >= self.data.len()
+    }
+
     /// `message` with the place in the file (ASCII line or binary byte offset).
     fn place(&self, message: String) -> String {
         match self.format {
