@@ -58,8 +58,9 @@ pub struct SceneArgs {
     #[arg(long)]
     pub reference_spp: Option<u32>,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
-    #[arg(long, default_value = "target/edgepoint-refs")]
-    pub ref_cache: PathBuf,
+    /// Default: $XDG_CACHE_HOME/edgepoint/references (else ~/.cache/edgepoint/references).
+    #[arg(long, value_name = "DIR")]
+    pub ref_cache: Option<PathBuf>,
     /// Camera overriding the scene's, any subset of "eye=X,Y,Z target=X,Y,Z up=X,Y,Z
     /// fov=DEG" (the viewer's --camera).
     #[arg(long, value_name = "KEYS", value_parser = edgepoint_viewer::camera_path::parse_camera_spec)]
@@ -144,7 +145,7 @@ async fn references(
     let pool = WorkerPool::new(endpoints)?;
     let dispatcher = pool.open(source.clone(), hash.clone());
     let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
-    let cache = RefCache::new(&a.ref_cache);
+    let cache = RefCache::at(a.ref_cache.as_deref());
     let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), &a.shader, &params);
     let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)) {
         Some(img) => (img, true),

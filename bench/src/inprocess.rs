@@ -81,8 +81,8 @@ impl Staged {
 
     /// The converged reference at `spp` samples per pixel: from the cache in `dir` when an
     /// earlier run (of this or the `frame` benchmark) stored it, else rendered in-process.
-    pub fn reference(&self, width: u32, height: u32, spp: u32, dir: &Path) -> Result<(Vec<Vec3>, bool)> {
-        let cache = RefCache::new(dir);
+    pub fn reference(&self, width: u32, height: u32, spp: u32, dir: Option<&Path>) -> Result<(Vec<Vec3>, bool)> {
+        let cache = RefCache::at(dir);
         let camera = &self.loaded.scene.camera;
         let key = RefCache::key(&pb::scene_hash(&self.source), camera, width, height, spp, &self.shader, &self.params);
         if let Some(img) = cache.load(&key, width, height, spp) {

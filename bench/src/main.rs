@@ -20,6 +20,8 @@
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
 //! - `encode`: the frame's conversion to sRGB, QOI / raw encoding and publishing, against
 //!   the encoder before (kept in the bench as the baseline), one thread and all.
+//! - `fuzz`: the scene-parser fuzz harness for as long as asked (findings go to the crash
+//!   corpus the tests replay).
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
 //! - `motion`: quality in motion — every frame of a scripted path (orbit, dolly, object
@@ -32,6 +34,7 @@ mod edges;
 mod encode;
 mod epi;
 mod frame;
+mod fuzz;
 mod inprocess;
 mod load;
 mod motion;
@@ -43,6 +46,10 @@ mod stats;
 mod throughput;
 
 use clap::{Parser, Subcommand};
+
+/// Counts allocations for `fuzz` (off, one relaxed load per allocation, otherwise).
+#[global_allocator]
+static ALLOC: edgepoint_scene::alloc_count::CountingAlloc = edgepoint_scene::alloc_count::CountingAlloc;
 
 #[derive(Parser, Debug)]
 #[command(name = "edgepoint-bench", version, about = "Benchmarks for edgepoint (JSON output with --json)")]
@@ -74,16 +81,15 @@ enum Cmd {
     Motion(motion::MotionArgs),
     /// Frame encoding (sRGB, QOI, raw) and publishing against the previous encoder.
     Encode(encode::EncodeArgs),
+    /// Fuzz the scene parsers: mutated seed inputs; panics, slow parses and out-of-proportion
+    /// allocations are findings, kept in the crash corpus.
+    Fuzz(fuzz::FuzzArgs),
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
     let cli = Cli::parse();
+    // Fuzz inputs make the loaders warn by the thousand: only errors, unless RUST_LOG says.
+    edgepoint_proto::logging::init(if matches!(cli.cmd, Cmd::Fuzz(_)) { "error" } else { "warn" });
     match cli.cmd {
         Cmd::Frame(a) => frame::run(a),
         Cmd::Throughput(a) => throughput::run(a),
@@ -95,6 +101,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Encode(a) => encode::run(a),
         Cmd::Edges(a) => edges::run(a),
         Cmd::Motion(a) => motion::run(a),
+        Cmd::Fuzz(a) => fuzz::run(a),
     }
 }
 

@@ -320,7 +320,7 @@ async fn references(cluster: &edgepoint_viewer::local::LocalCluster, args: &Moti
     let pool = WorkerPool::new(endpoints)?;
     let dispatcher = pool.open(source.clone(), hash.clone());
     let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
-    let cache = RefCache::new(&a.ref_cache);
+    let cache = RefCache::at(a.ref_cache.as_deref());
     let spp = reference_spp(args);
     let mut out = Vec::with_capacity(steps.len());
     let mut epoch = 0u64;

@@ -32,8 +32,10 @@ pub struct QualityArgs {
     #[arg(long)]
     pub all: bool,
     /// Directory of the shared models (bunny/bun_zipper.ply, dragon/dragon_vrip.ply).
-    #[arg(long = "data-dir", visible_alias = "data", default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))]
-    pub data: PathBuf,
+    /// Default: $EDGEPOINT_DATA, else a shared/data directory in or above the working
+    /// directory or this executable.
+    #[arg(long = "data-dir", visible_alias = "data", value_name = "DIR")]
+    pub data: Option<PathBuf>,
     #[arg(long, default_value_t = 512)]
     pub width: u32,
     #[arg(long, default_value_t = 512)]
@@ -44,9 +46,10 @@ pub struct QualityArgs {
     /// Samples per pixel of the converged reference.
     #[arg(long, default_value_t = 64)]
     pub reference_spp: u32,
-    /// Directory caching converged references (shared with `frame`).
-    #[arg(long, default_value = "target/edgepoint-refs")]
-    pub ref_cache: PathBuf,
+    /// Directory caching converged references (shared with `frame`). Default:
+    /// $XDG_CACHE_HOME/edgepoint/references (else ~/.cache/edgepoint/references).
+    #[arg(long, value_name = "DIR")]
+    pub ref_cache: Option<PathBuf>,
     /// Seed of the pixel set and its jitter.
     #[arg(long, default_value_t = 0x5a3e)]
     pub seed: u64,
@@ -95,7 +98,8 @@ pub fn run(args: QualityArgs) -> Result<()> {
             scenes.push(s.to_string());
         }
         for m in ["bunny/bun_zipper.ply", "dragon/dragon_vrip.ply"] {
-            scenes.push(args.data.join(m).display().to_string());
+            let path = edgepoint_scene::data::find_file(m, args.data.as_deref()).map_err(anyhow::Error::msg)?;
+            scenes.push(path.display().to_string());
         }
     }
     if scenes.is_empty() {
@@ -124,7 +128,7 @@ pub fn run(args: QualityArgs) -> Result<()> {
     for name in &scenes {
         let staged = Staged::load(name, "direct", &params)?;
         let tag = std::path::Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into_owned());
-        let (reference, cached) = staged.reference(w, h, args.reference_spp, &args.ref_cache)?;
+        let (reference, cached) = staged.reference(w, h, args.reference_spp, args.ref_cache.as_deref())?;
         tracing::info!("{name}: reference {}", if cached { "from the cache" } else { "rendered" });
         let cam = staged.camera(w, h);
         let top = args.densities.iter().cloned().fold(0.0, f64::max);

@@ -1,5 +1,6 @@
 //! On-disk cache of converged reference images: rendering one takes many seconds, and every
-//! benchmark run of the same setup needs the same image.
+//! benchmark run of the same setup needs the same image. It lives in the user's cache
+//! directory ([`default_dir`]), never relative to wherever the bench happens to be started.
 use anyhow::{Context, Result};
 use edgepoint_scene::Camera;
 use edgepoint_server::reference::ReferenceImage;
@@ -12,9 +13,18 @@ pub struct RefCache {
     dir: PathBuf,
 }
 
+/// Where references are cached unless `--ref-cache` says: `$XDG_CACHE_HOME/edgepoint/references`,
+/// else `$HOME/.cache/edgepoint/references`, else the system's temporary directory.
+pub fn default_dir() -> PathBuf {
+    let non_empty = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let base = non_empty("XDG_CACHE_HOME").or_else(|| non_empty("HOME").map(|h| h.join(".cache"))).unwrap_or_else(std::env::temp_dir);
+    base.join("edgepoint").join("references")
+}
+
 impl RefCache {
-    pub fn new(dir: &Path) -> Self {
-        RefCache { dir: dir.to_path_buf() }
+    /// The cache in `dir`, or in [`default_dir`].
+    pub fn at(dir: Option<&Path>) -> Self {
+        RefCache { dir: dir.map_or_else(default_dir, Path::to_path_buf) }
     }
 
     /// A file name that changes whenever anything that affects the image changes.

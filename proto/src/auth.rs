@@ -1,7 +1,13 @@
-//! Bearer tokens for viewer sessions: the token file format shared by the server
-//! (`--token-file`: the accepted tokens) and the viewer (`--token-file`: the one it sends),
-//! the `authorization` metadata, and a comparison that does not leak where a guess differs.
+//! Bearer tokens: the token file format shared by the server (`--token-file`: the viewer
+//! tokens it accepts; `--worker-token-file`: the one it sends its workers), the worker
+//! (`--token-file`: the renderer tokens it accepts) and the viewer (`--token-file`: the one it
+//! sends), the `authorization` metadata, the check of a call's token against the accepted
+//! ones (with a comparison that does not leak where a guess differs), and the interceptors
+//! that add and check it on every gRPC call.
 use std::path::Path;
+use std::sync::Arc;
+use tonic::metadata::{Ascii, MetadataMap, MetadataValue};
+use tonic::Status;
 
 /// The gRPC metadata key carrying `Bearer <token>`.
 pub const AUTHORIZATION: &str = "authorization";
@@ -51,6 +57,79 @@ pub fn parse_bearer(value: &str) -> Option<&str> {
     scheme.eq_ignore_ascii_case("bearer").then(|| token.trim()).filter(|t| !t.is_empty())
 }
 
+/// Checks the bearer token in `md` against `accepted`. `hint` tells a caller without a token
+/// how to send one (e.g. which flag of which program).
+pub fn check_bearer(md: &MetadataMap, accepted: &[String], hint: &str) -> Result<(), Status> {
+    let Some(value) = md.get(AUTHORIZATION) else {
+        return Err(Status::unauthenticated(format!("this service requires a bearer token: {hint}")));
+    };
+    let value = value.to_str().map_err(|_| Status::unauthenticated("the authorization header is not ASCII"))?;
+    let token = parse_bearer(value).ok_or_else(|| Status::unauthenticated("the authorization header must be `Bearer <token>`"))?;
+    // Compare against every accepted token, so the time taken does not tell which matched.
+    let ok = accepted.iter().fold(false, |ok, t| ok | constant_time_eq(t, token));
+    if ok {
+        Ok(())
+    } else {
+        Err(Status::unauthenticated("invalid bearer token"))
+    }
+}
+
+/// Adds `authorization: Bearer <token>` to every call (`None`: adds nothing). The
+/// renderer's calls to its workers go through it.
+#[derive(Clone, Default)]
+pub struct SendToken(Option<MetadataValue<Ascii>>);
+
+impl SendToken {
+    pub fn new(token: Option<&str>) -> Result<SendToken, String> {
+        match token {
+            None => Ok(SendToken(None)),
+            Some(t) => {
+                check_token(t)?;
+                let v = bearer(t).parse().map_err(|_| "the token is not a valid header value".to_string())?;
+                Ok(SendToken(Some(v)))
+            }
+        }
+    }
+}
+
+impl std::fmt::Debug for SendToken {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() { "SendToken(<token>)" } else { "SendToken(none)" })
+    }
+}
+
+impl tonic::service::Interceptor for SendToken {
+    fn call(&mut self, mut req: tonic::Request<()>) -> Result<tonic::Request<()>, Status> {
+        if let Some(v) = &self.0 {
+            req.metadata_mut().insert(AUTHORIZATION, v.clone());
+        }
+        Ok(req)
+    }
+}
+
+/// Refuses every call without one of the accepted tokens with UNAUTHENTICATED (`None`:
+/// accepts every call). A worker's service goes behind it.
+#[derive(Clone)]
+pub struct RequireToken {
+    accepted: Option<Arc<Vec<String>>>,
+    hint: &'static str,
+}
+
+impl RequireToken {
+    pub fn new(accepted: Option<Arc<Vec<String>>>, hint: &'static str) -> Self {
+        RequireToken { accepted, hint }
+    }
+}
+
+impl tonic::service::Interceptor for RequireToken {
+    fn call(&mut self, req: tonic::Request<()>) -> Result<tonic::Request<()>, Status> {
+        if let Some(a) = &self.accepted {
+            check_bearer(req.metadata(), a, self.hint)?;
+        }
+        Ok(req)
+    }
+}
+
 /// Equal strings, compared in time that depends only on their lengths.
 pub fn constant_time_eq(a: &str, b: &str) -> bool {
     let (a, b) = (a.as_bytes(), b.as_bytes());
@@ -82,6 +161,23 @@ mod tests {
         assert!(read_token_file(&dir.join("absent")).unwrap_err().contains("absent"));
         assert!(check_token("has a space in it ok").is_err());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn interceptors_send_and_require_tokens() {
+        use tonic::service::Interceptor;
+        let token = "renderer-token-0123456789";
+        let mut send = SendToken::new(Some(token)).unwrap();
+        let req = send.call(tonic::Request::new(())).unwrap();
+        let mut require = RequireToken::new(Some(Arc::new(vec!["old-token-000000000000".into(), token.into()])), "start the renderer with --worker-token-file");
+        assert!(require.call(req).is_ok());
+        let e = require.call(tonic::Request::new(())).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        assert!(e.message().contains("--worker-token-file"), "{}", e.message());
+        let wrong = SendToken::new(Some("wrong-token-0123456789")).unwrap().call(tonic::Request::new(())).unwrap();
+        assert!(require.call(wrong).unwrap_err().message().contains("invalid"));
+        assert!(RequireToken::new(None, "").call(tonic::Request::new(())).is_ok(), "no tokens configured: open");
+        assert!(SendToken::new(Some("short")).is_err());
     }
 
     #[test]

@@ -59,10 +59,12 @@ pub fn affine_from_wire(w: &v1::Affine) -> Result<Affine3A, String> {
         Vec3A::new(r[2], r[6], r[10]),
     );
     let det = m.determinant();
-    if !det.is_finite() || det.abs() < 1e-12 {
+    if !(det.abs() >= 1e-12) {
         return Err(format!("transform is singular (determinant {det})"));
     }
-    Ok(Affine3A::from_mat3_translation(m.into(), Vec3::new(r[3], r[7], r[11])))
+    let a = Affine3A::from_mat3_translation(m.into(), Vec3::new(r[3], r[7], r[11]));
+    edgepoint_scene::limits::check_affine(&a)?;
+    Ok(a)
 }
 
 /// The wire form of an orbit.
@@ -156,6 +158,12 @@ mod tests {
         rows[5] = f32::NAN;
         assert!(affine_from_wire(&v1::Affine { rows }).unwrap_err().contains("not finite"));
         assert!(affine_from_wire(&v1::Affine { rows: vec![0.0; 12] }).unwrap_err().contains("singular"));
+        let mut rows = affine_to_wire(&Affine3A::IDENTITY).rows;
+        rows[3] = 3e38;
+        assert!(affine_from_wire(&v1::Affine { rows }).unwrap_err().contains("translation"));
+        let mut rows = affine_to_wire(&Affine3A::IDENTITY).rows;
+        rows[0] = 1e30;
+        assert!(affine_from_wire(&v1::Affine { rows }).unwrap_err().contains("beyond"));
     }
 
     #[test]

@@ -19,5 +19,7 @@ mod source;
 pub use source::*;
 
 pub mod auth;
+pub mod logging;
 pub mod metrics_http;
 pub mod net;
+pub mod shaders;

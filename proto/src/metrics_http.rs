@@ -76,12 +76,14 @@ fn answer(req: &Request<hyper::body::Incoming>, render: &Render) -> Response<Ful
 }
 
 /// Binds `addr`, prints `metrics <addr>` on stdout (the launcher contract: before the
-/// `listening` line) and serves the endpoint on a spawned task.
-pub async fn start(addr: &str, render: Render) -> std::io::Result<std::net::SocketAddr> {
+/// `listening` line) and serves the endpoint on a spawned task. A non-loopback address is
+/// refused unless `public` (`--metrics-public`): see [`crate::net::check_metrics_exposure`].
+pub async fn start(addr: &str, public: bool, render: Render) -> std::io::Result<std::net::SocketAddr> {
     let listener = TcpListener::bind(addr)
         .await
         .map_err(|e| std::io::Error::new(e.kind(), format!("cannot listen for metrics on {addr}: {e}")))?;
     let bound = listener.local_addr()?;
+    crate::net::check_metrics_exposure(bound, public).map_err(std::io::Error::other)?;
     {
         use std::io::Write;
         let mut out = std::io::stdout().lock();

@@ -27,26 +27,30 @@ pub struct CameraFrame {
 }
 
 impl Camera {
-    /// Checks that the camera can make an image: finite values, eye != target, up not
-    /// parallel to the view direction, 0 < fov < 180.
+    /// Checks that the camera can make an image: finite values within
+    /// [`MAX_WORLD_COORDINATE`](crate::limits::MAX_WORLD_COORDINATE), eye != target, up not
+    /// parallel to the view direction, 0 < fov < 180. Every test is written so that a NaN
+    /// fails it (an overflowing camera must not pass through NaN comparisons).
     pub fn validate(&self) -> Result<(), String> {
+        use crate::limits::{check_vec, MAX_WORLD_COORDINATE};
         for (name, v) in [("eye", self.eye), ("target", self.target), ("up", self.up)] {
-            if !v.is_finite() {
-                return Err(format!("camera {name} is not finite ({v})"));
-            }
+            check_vec(&format!("camera {name}"), v, MAX_WORLD_COORDINATE)?;
         }
-        if !self.fov_y_degrees.is_finite() || self.fov_y_degrees <= 0.0 || self.fov_y_degrees >= 180.0 {
+        if !(self.fov_y_degrees > 0.0 && self.fov_y_degrees < 180.0) {
             return Err(format!(
                 "camera field of view must be in (0, 180) degrees, got {}",
                 self.fov_y_degrees
             ));
         }
         let fwd = self.target - self.eye;
-        if fwd.length() < 1e-9 {
+        if !(fwd.length() >= 1e-9) {
             return Err("camera eye and target coincide (zero view direction)".into());
         }
-        if self.up.length() < 1e-9 || fwd.normalize().cross(self.up.normalize()).length() < 1e-6 {
-            return Err("camera up vector is zero or parallel to the view direction".into());
+        if !(self.up.length() >= 1e-9) {
+            return Err("camera up vector is zero".into());
+        }
+        if !(fwd.normalize().cross(self.up.normalize()).length() >= 1e-6) {
+            return Err("camera up vector is parallel to the view direction".into());
         }
         Ok(())
     }
@@ -149,8 +153,20 @@ mod tests {
         assert!(c.validate().is_err());
         let mut c = cam();
         c.up = c.target - c.eye;
-        assert!(c.validate().is_err());
+        assert!(c.validate().unwrap_err().contains("parallel"));
         cam().validate().unwrap();
+        // Overflowing coordinates: eye - target is infinite, every derived value NaN.
+        let mut c = cam();
+        (c.eye.x, c.target.x) = (3e38, -3e38);
+        assert!(c.validate().unwrap_err().contains("beyond"), "{:?}", c.validate());
+        // Huge but finite: the message names the coordinate, not the up vector.
+        let mut c = cam();
+        c.eye = Vec3::splat(1e30);
+        let e = c.validate().unwrap_err();
+        assert!(e.contains("camera eye") && e.contains("beyond"), "{e}");
+        let mut c = cam();
+        c.up = Vec3::new(0.0, 1e-30, 0.0);
+        assert!(c.validate().unwrap_err().contains("zero"));
     }
 
     #[test]

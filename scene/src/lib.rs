@@ -9,12 +9,19 @@
 //! Loaders read PLY (binary and ASCII) and OBJ (+MTL colours); built-in scenes are in
 //! [`builtin`] (procedural, or made from the shared data found by [`data`]).
 
+// Checks are written `!(x >= min)` on purpose: that is true for NaN, where `x < min` is not,
+// so a NaN never passes a validation by failing every comparison (issue 12 item 9).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod alloc_count;
 pub mod builtin;
 pub mod camera;
 pub mod data;
 pub mod error;
 pub mod geometry;
+pub mod fuzz;
 pub mod light;
+pub mod limits;
 pub mod load;
 pub mod material;
 pub mod mesh;

@@ -1,4 +1,5 @@
 //! Lights: point lights and planar convex polygonal area lights (paper 000 §6.3).
+use crate::limits::{check_vec, MAX_WORLD_COORDINATE};
 use glam::Vec3;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -43,19 +44,23 @@ impl Light {
     pub fn validate(&self) -> Result<(), String> {
         match self {
             Light::Point { position, intensity } => {
-                if !position.is_finite() || !intensity.is_finite() {
-                    return Err("point light has non-finite position or intensity".into());
+                check_vec("point light position", *position, MAX_WORLD_COORDINATE)?;
+                if !intensity.is_finite() {
+                    return Err(format!("point light intensity is not finite ({intensity})"));
                 }
             }
             Light::Area { vertices, radiance } => {
                 if vertices.len() < 3 {
                     return Err(format!("area light needs >= 3 vertices, has {}", vertices.len()));
                 }
-                if !radiance.is_finite() || vertices.iter().any(|v| !v.is_finite()) {
-                    return Err("area light has non-finite values".into());
+                if !radiance.is_finite() {
+                    return Err(format!("area light radiance is not finite ({radiance})"));
+                }
+                for (i, v) in vertices.iter().enumerate() {
+                    check_vec(&format!("area light vertex {i}"), *v, MAX_WORLD_COORDINATE)?;
                 }
                 let n = polygon_normal(vertices);
-                if n.length() < 1e-12 {
+                if !(n.length() >= 1e-12) {
                     return Err("area light polygon has zero area".into());
                 }
                 let n = n.normalize();
@@ -117,5 +122,8 @@ mod tests {
         assert!(flat.validate().is_err());
         let nan = Light::Point { position: Vec3::NAN, intensity: Vec3::ONE };
         assert!(nan.validate().is_err());
+        let far = Light::Point { position: Vec3::new(0.0, 3e20, 0.0), intensity: Vec3::ONE };
+        let e = far.validate().unwrap_err();
+        assert!(e.contains("point light position") && e.contains("beyond"), "{e}");
     }
 }

@@ -5,6 +5,7 @@ mod obj;
 mod ply;
 mod stage;
 
+pub use obj::{mtllib_names, mtllib_path};
 pub use stage::stage_meshes;
 
 use crate::{Light, Material, Mesh, Object, Progress, Scene, SceneError};
@@ -57,6 +58,7 @@ pub fn load_files(files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene
         }
         "obj" => {
             let data = obj::read(main, &files[1..], progress)?;
+            let mut scratch = Vec::new();
             let mut objects = Vec::new();
             let mut lights = Vec::new();
             for run in data.runs {
@@ -72,7 +74,7 @@ pub fn load_files(files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene
                         }
                     }
                 }
-                let mesh = Mesh::from_triangles(data.positions.clone(), run.triangles, progress);
+                let mesh = run_mesh(&data.positions, run.triangles, &mut scratch, progress);
                 if mesh.triangles.is_empty() {
                     continue;
                 }
@@ -88,6 +90,30 @@ pub fn load_files(files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene
             format!("unsupported scene file type `.{other}` (supported: .ply, .obj, .builtin)"),
         )),
     }
+}
+
+/// The mesh of one OBJ run: only the vertices its triangles use (in their file order, so
+/// welding picks the same representatives as on the whole list), welded. Welding the whole
+/// vertex list for every object made a file of many small objects quadratic. `scratch` maps
+/// file vertices to run vertices; it is left all `u32::MAX` for the next run.
+fn run_mesh(positions: &[glam::Vec3], mut triangles: Vec<[u32; 3]>, scratch: &mut Vec<u32>, progress: &dyn Progress) -> Mesh {
+    let mut used: Vec<u32> = triangles.iter().flatten().copied().collect();
+    used.sort_unstable();
+    used.dedup();
+    if scratch.len() < positions.len() {
+        scratch.resize(positions.len(), u32::MAX);
+    }
+    let local: Vec<glam::Vec3> = used.iter().map(|&i| positions[i as usize]).collect();
+    for (k, &i) in used.iter().enumerate() {
+        scratch[i as usize] = k as u32;
+    }
+    for t in &mut triangles {
+        *t = t.map(|i| scratch[i as usize]);
+    }
+    for &i in &used {
+        scratch[i as usize] = u32::MAX;
+    }
+    Mesh::from_triangles(local, triangles, progress)
 }
 
 /// The welded mesh of a mesh file (.ply; .obj: all its faces as one mesh).
@@ -111,22 +137,19 @@ pub(crate) fn mesh_from_file(file: &NamedBytes, progress: &dyn Progress) -> Resu
     Ok(mesh)
 }
 
-/// Reads a scene file from disk (for an OBJ also the `mtllib` files next to it) and loads it.
+/// Reads a scene file from disk (for an OBJ also the `mtllib` files it may name: see
+/// [`mtllib_path`]; one it may not, or that is missing, is a warning, as in the loader) and
+/// loads it.
 pub fn load_path(path: &Path, progress: &dyn Progress) -> Result<Scene, SceneError> {
     let shown = path.display().to_string();
     let data = std::fs::read(path).map_err(|e| SceneError::file(&shown, format!("cannot read: {e}")))?;
     let mut files = vec![NamedBytes { name: shown.clone(), data }];
     if extension(&shown) == "obj" {
-        let text = String::from_utf8_lossy(&files[0].data).into_owned();
-        for line in text.lines() {
-            let mut w = line.split_whitespace();
-            if w.next() == Some("mtllib") {
-                for lib in w {
-                    let p = path.parent().unwrap_or(Path::new(".")).join(lib);
-                    if let Ok(d) = std::fs::read(&p) {
-                        files.push(NamedBytes { name: p.display().to_string(), data: d });
-                    }
-                }
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for (line, lib) in mtllib_names(&files[0].data) {
+            match mtllib_path(dir, &lib).and_then(|p| std::fs::read(&p).map_err(|e| format!("cannot read {}: {e}", p.display()))) {
+                Ok(d) => files.push(NamedBytes { name: lib, data: d }),
+                Err(e) => tracing::warn!("{shown}:{line}: mtllib {lib}: {e}; its materials fall back to the default"),
             }
         }
     }

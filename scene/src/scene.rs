@@ -77,9 +77,7 @@ impl Scene {
             l.validate().map_err(|e| format!("light {i}: {e}"))?;
         }
         for o in &self.objects {
-            if !o.transform.is_finite() {
-                return Err(format!("object {}: transform is not finite", o.name));
-            }
+            crate::limits::check_affine(&o.transform).map_err(|e| format!("object {}: {e}", o.name))?;
         }
         if let Some(o) = &self.orbit {
             o.validate()?;

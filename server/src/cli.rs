@@ -18,7 +18,7 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:50051";
 /// run. The server listens on 127.0.0.1 unless told otherwise; any other address needs TLS
 /// (--tls-cert/--tls-key) and viewer tokens (--token-file), or an explicit --insecure.
 #[derive(Parser, Debug, Clone)]
-#[command(name = "edgepoint-server", version)]
+#[command(name = "edgepoint-server", version, after_help = edgepoint_proto::shaders::help_text())]
 pub struct ServerArgs {
     /// Address to listen on (host:port; port 0 picks a free port). The bound address is
     /// printed on stdout as `listening <addr>`.
@@ -54,6 +54,21 @@ pub struct ServerArgs {
     #[arg(long, value_name = "NAME")]
     pub worker_tls_domain: Option<String>,
 
+    /// File holding the token sent to the workers on every call (its first token line;
+    /// the workers accept it with their --token-file). Workers beyond loopback require it
+    /// or mutual TLS.
+    #[arg(long, value_name = "FILE")]
+    pub worker_token_file: Option<PathBuf>,
+
+    /// PEM certificate chain presented to `https://` workers started with --tls-client-ca
+    /// (mutual TLS; with --worker-tls-key).
+    #[arg(long, value_name = "FILE", requires = "worker_tls_key")]
+    pub worker_tls_cert: Option<PathBuf>,
+
+    /// PEM private key of --worker-tls-cert.
+    #[arg(long, value_name = "FILE", requires = "worker_tls_cert")]
+    pub worker_tls_key: Option<PathBuf>,
+
     /// Most render sessions (viewers) served at once; further ones get RESOURCE_EXHAUSTED.
     #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub max_sessions: u32,
@@ -67,6 +82,14 @@ pub struct ServerArgs {
     /// refused with RESOURCE_EXHAUSTED.
     #[arg(long, value_name = "PIXELS", default_value_t = DEFAULT_MAX_FRAME_PIXELS, value_parser = clap::value_parser!(u64).range(1..=(1u64 << 28)))]
     pub max_frame_pixels: u64,
+
+    /// Memory all sessions together may take, in MiB (default: half of the machine's
+    /// memory, or of the container's limit when that is smaller). Each session's need is estimated at `start` from its image size (its
+    /// Render Cache, edge-and-point image and buffers: about 360 bytes per pixel with the
+    /// default --points-per-pixel 2); a session that does not fit in what is left is refused
+    /// with RESOURCE_EXHAUSTED, and so is a settings change that would outgrow it.
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(16..=(1u64 << 40)))]
+    pub max_memory_mib: Option<u64>,
 
     /// Seconds a viewer has to send `start` after opening a session (else DEADLINE_EXCEEDED).
     #[arg(long, value_name = "S", default_value_t = DEFAULT_START_TIMEOUT.as_secs(), value_parser = clap::value_parser!(u64).range(1..=3600))]
@@ -100,6 +123,11 @@ pub struct ServerArgs {
     #[arg(long, value_name = "ADDR")]
     pub metrics_listen: Option<String>,
 
+    /// Allow --metrics-listen on a non-loopback address (the endpoint is plain HTTP without
+    /// authentication and names the workers' addresses).
+    #[arg(long, requires = "metrics_listen")]
+    pub metrics_public: bool,
+
     /// Target shading time of one batch sent to a worker, in ms: a worker's batch size
     /// follows its measured rate so a batch holds about this much work (slow workers get
     /// smaller batches).
@@ -131,6 +159,7 @@ mod tests {
             "127.0.0.1:1",
             "--metrics-listen",
             "0.0.0.0:9464",
+            "--metrics-public",
         ])
         .unwrap();
         assert_eq!((a.worker_dns.len(), a.workers.len()), (1, 1));

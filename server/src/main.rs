@@ -17,12 +17,7 @@ use std::time::Duration;
 const MAX_STREAMS_PER_CONNECTION: u32 = 64;
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    edgepoint_proto::logging::init("info");
     let cli = ServerArgs::parse();
     if !(cli.points_per_pixel.is_finite() && (0.25..=64.0).contains(&cli.points_per_pixel)) {
         eprintln!("error: --points-per-pixel must be in [0.25, 64], got {}", cli.points_per_pixel);
@@ -54,10 +49,21 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         (Some(c), Some(k)) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
         _ => None,
     };
-    let worker_tls = if cli.worker_tls_ca.is_some() || cli.worker_tls_domain.is_some() {
+    let mut worker_tls = if cli.worker_tls_ca.is_some() || cli.worker_tls_domain.is_some() || cli.worker_tls_cert.is_some() {
         Some(client_tls(cli.worker_tls_ca.as_deref(), cli.worker_tls_domain.as_deref()).map_err(anyhow::Error::msg)?)
     } else {
         None
+    };
+    if let (Some(c), Some(k)) = (&cli.worker_tls_cert, &cli.worker_tls_key) {
+        let t = worker_tls.take().expect("set above when --worker-tls-cert is given");
+        worker_tls = Some(edgepoint_proto::net::client_identity(t, c, k).map_err(anyhow::Error::msg)?);
+    }
+    let worker_token = match &cli.worker_token_file {
+        Some(p) => {
+            let t = edgepoint_proto::auth::read_token_file(p).map_err(anyhow::Error::msg)?;
+            Some(edgepoint_proto::auth::SendToken::new(t.first().map(String::as_str)).map_err(anyhow::Error::msg)?)
+        }
+        None => None,
     };
 
     // Bind first, so that the exposure check sees the address actually bound.
@@ -85,6 +91,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         stall_floor: Duration::from_millis(cli.worker_stall_ms),
         stall_cap: Duration::from_millis(cli.worker_stall_ms).max(Duration::from_secs(10)),
         metrics: metrics.pool.clone(),
+        worker_token: worker_token.unwrap_or_default(),
         ..PoolOptions::default()
     };
     let pool = Arc::new(WorkerPool::discover(sources.clone(), opts).await?);
@@ -98,6 +105,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         let (pool, metrics) = (pool.clone(), metrics.clone());
         edgepoint_proto::metrics_http::start(
             m,
+            cli.metrics_public,
             Arc::new(move || {
                 pool.refresh_metrics();
                 metrics.encode()
@@ -106,6 +114,11 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         .await?;
     }
 
+    let memory_limit = match cli.max_memory_mib {
+        Some(m) => m << 20,
+        None => edgepoint_server::session::memory::default_budget_bytes(),
+    };
+    tracing::info!(max_memory_mib = memory_limit >> 20, "session memory budget (--max-memory-mib)");
     let service = RendererService::new(
         pool,
         ServiceConfig {
@@ -115,6 +128,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
             max_message_bytes: max_message,
             tokens: tokens.clone(),
             start_timeout: Duration::from_secs(cli.start_timeout_secs),
+            memory: edgepoint_server::session::memory::MemoryBudget::new(memory_limit),
             metrics: metrics.sessions.clone(),
         },
     );
@@ -149,7 +163,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
     let server = builder
         .add_service(health_service)
         .add_service(service.into_server(max_message))
-        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), async {
+        .serve_with_incoming_shutdown(edgepoint_proto::net::guarded_incoming(listener), async {
             let _ = stop_rx.await;
         });
     let mut server = std::pin::pin!(server);

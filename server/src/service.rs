@@ -9,17 +9,19 @@
 //! Remote viewing is guarded here: with tokens configured a session needs
 //! `authorization: Bearer <token>` (else UNAUTHENTICATED); `start` must arrive within
 //! [`ServiceConfig::start_timeout`] (else DEADLINE_EXCEEDED); the frame must fit the server's
-//! pixel limit and, encoded at its worst, the message limit (else RESOURCE_EXHAUSTED); and at
-//! most `max_sessions` run at once (else RESOURCE_EXHAUSTED). Messages above the size limit
+//! pixel limit and, encoded at its worst, the message limit (else RESOURCE_EXHAUSTED); its
+//! estimated memory must fit in what the server-wide budget has left (else
+//! RESOURCE_EXHAUSTED); and at most `max_sessions` run at once (else RESOURCE_EXHAUSTED). Messages above the size limit
 //! are refused by tonic itself (OUT_OF_RANGE). Every refusal is counted by reason in the
 //! metrics, and every sent frame feeds the frame-time and frame-interval histograms.
 use crate::metrics::{Refusal, SessionMetrics};
 use crate::reference::LogProgress;
 use crate::rng::mix64;
+use crate::session::memory::{MemoryBudget, MemoryGrant, SessionMemory};
 use crate::session::{camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
 use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
-use edgepoint_proto::auth::{constant_time_eq, parse_bearer, AUTHORIZATION};
+use edgepoint_proto::auth::check_bearer;
 use edgepoint_proto::renderer_server::{Renderer, RendererServer};
 use edgepoint_proto::viewer_msg::Msg as ViewerIn;
 use std::collections::HashMap;
@@ -32,7 +34,7 @@ use tonic::{Request, Response, Status, Streaming};
 /// Largest image side accepted.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// Shader used when `start.shader` is empty.
-pub const DEFAULT_SHADER: &str = "direct";
+pub const DEFAULT_SHADER: &str = edgepoint_proto::shaders::DEFAULT_SHADER;
 /// How long `start` waits for workers to list their shaders before trusting the name.
 const SHADER_QUERY_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -61,6 +63,9 @@ pub struct ServiceConfig {
     pub tokens: Option<Arc<Vec<String>>>,
     /// Time allowed between opening a session stream and its `start`.
     pub start_timeout: Duration,
+    /// The memory all sessions together may take (their [`SessionMemory`] estimates); a
+    /// session that would exceed it is refused with RESOURCE_EXHAUSTED.
+    pub memory: Arc<MemoryBudget>,
     pub metrics: Arc<SessionMetrics>,
 }
 
@@ -73,6 +78,7 @@ impl std::fmt::Debug for ServiceConfig {
             .field("max_message_bytes", &self.max_message_bytes)
             .field("tokens", &self.tokens.as_ref().map(|t| format!("{} token(s)", t.len())))
             .field("start_timeout", &self.start_timeout)
+            .field("memory_limit", &self.memory.limit())
             .finish()
     }
 }
@@ -86,6 +92,7 @@ impl Default for ServiceConfig {
             max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
             tokens: None,
             start_timeout: DEFAULT_START_TIMEOUT,
+            memory: MemoryBudget::unlimited(),
             metrics: Arc::new(SessionMetrics::default()),
         }
     }
@@ -156,20 +163,7 @@ impl RendererService {
     /// Checks the viewer's bearer token when tokens are configured.
     fn authenticate(&self, md: &tonic::metadata::MetadataMap) -> Result<(), Status> {
         let Some(tokens) = &self.cfg.tokens else { return Ok(()) };
-        let Some(value) = md.get(AUTHORIZATION) else {
-            return Err(Status::unauthenticated(
-                "this server requires a bearer token: give the viewer --token-file FILE (or --token)",
-            ));
-        };
-        let value = value.to_str().map_err(|_| Status::unauthenticated("the authorization header is not ASCII"))?;
-        let token = parse_bearer(value).ok_or_else(|| Status::unauthenticated("the authorization header must be `Bearer <token>`"))?;
-        // Compare against every accepted token, so the time taken does not tell which matched.
-        let ok = tokens.iter().fold(false, |ok, t| ok | constant_time_eq(t, token));
-        if ok {
-            Ok(())
-        } else {
-            Err(Status::unauthenticated("invalid bearer token"))
-        }
+        check_bearer(md, tokens, "give the viewer --token-file FILE (or --token)")
     }
 
     /// Refuses frames above the pixel limit, or that could not fit in a message encoded.
@@ -191,6 +185,16 @@ impl RendererService {
             )));
         }
         Ok(())
+    }
+
+    /// Grants the session's estimated memory from the server's budget, or refuses it with
+    /// RESOURCE_EXHAUSTED saying how much it needs and how much is in use.
+    fn grant_memory(&self, s: &pb::Start, settings: &SessionSettings) -> Result<MemoryGrant, Status> {
+        let need = SessionMemory::estimate(s.width, s.height, self.cfg.points_per_pixel, settings, rayon::current_num_threads());
+        self.cfg
+            .memory
+            .grant(need.total(), &format!("a {}x{} session", s.width, s.height))
+            .map_err(Status::resource_exhausted)
     }
 
     fn acquire_slot(&self) -> Result<Slot, Status> {
@@ -225,11 +229,9 @@ fn check_start(s: &pb::Start) -> Result<StartChecked, Status> {
     let encoding = pb::FrameEncoding::try_from(s.encoding)
         .map_err(|_| invalid(format!("start.encoding {} is not a known FrameEncoding", s.encoding)))?;
     let shader = if s.shader.is_empty() { DEFAULT_SHADER.to_string() } else { s.shader.clone() };
-    for (k, v) in &s.shader_params {
-        if !v.is_finite() {
-            return Err(invalid(format!("start.shader_params[{k}] is not finite ({v})")));
-        }
-    }
+    // The shared table: a parameter the workers would refuse is refused here, at once,
+    // instead of giving a session of black frames.
+    edgepoint_proto::shaders::resolve(&shader, &s.shader_params).map_err(|e| invalid(format!("start: {e}")))?;
     let settings = match &s.settings {
         Some(st) => SessionSettings::default().with(st).map_err(|e| invalid(format!("start: {e}")))?,
         None => SessionSettings::default(),
@@ -327,12 +329,14 @@ impl RendererService {
                 return Err(invalid(format!("unknown shader '{}' (the workers offer: {})", checked.shader, shaders.join(", "))));
             }
         }
+        let memory = self.grant_memory(&start, &checked.settings)?;
         let slot = self.acquire_slot()?;
 
         let source = start.scene.clone().expect("checked in check_start");
         let hash = pb::scene_hash(&source);
         let what = pb::describe_source(&source);
-        tracing::info!(?peer, scene = %what, width = start.width, height = start.height, "session starting");
+        tracing::info!(?peer, scene = %what, width = start.width, height = start.height,
+            memory_mib = memory.bytes() >> 20, budget_used_mib = self.cfg.memory.used() >> 20, "session starting");
         let shared = match self.state.scenes.get(&hash) {
             Some(shared) => shared,
             None => {
@@ -370,6 +374,7 @@ impl RendererService {
             points_per_pixel: self.cfg.points_per_pixel,
             seed,
             edge_index: shared.edge_index,
+            memory: Some(memory),
         };
         let state = self.state.clone();
         let on_end: Box<dyn FnOnce() + Send> = Box::new(move || {
@@ -508,6 +513,15 @@ mod tests {
         assert!(check_start(&pb::Start { settings: Some(bad_settings), ..start() }).unwrap_err().message().contains("sparseness"));
         let params = HashMap::from([("ambient".to_string(), f64::NAN)]);
         assert!(check_start(&pb::Start { shader_params: params, ..start() }).unwrap_err().message().contains("ambient"));
+        // Issue 12 item 8: an unknown parameter is refused at start, listing the valid ones.
+        let params = HashMap::from([("bogus".to_string(), 1.0)]);
+        let e = check_start(&pb::Start { shader_params: params, ..start() }).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert!(e.message().contains("'bogus'") && e.message().contains("shadow_rays") && e.message().contains("ambient"), "{}", e.message());
+        let params = HashMap::from([("shadow_rays".to_string(), 0.0)]);
+        assert!(check_start(&pb::Start { shader_params: params, ..start() }).unwrap_err().message().contains("shadow_rays"));
+        let e = check_start(&pb::Start { shader: "glossy".into(), ..start() }).unwrap_err();
+        assert!(e.message().contains("unknown shader 'glossy'"), "{}", e.message());
     }
 
     fn service(cfg: ServiceConfig) -> RendererService {
@@ -522,7 +536,7 @@ mod tests {
         let md = |v: Option<&str>| {
             let mut m = tonic::metadata::MetadataMap::new();
             if let Some(v) = v {
-                m.insert(AUTHORIZATION, v.parse().unwrap());
+                m.insert(edgepoint_proto::auth::AUTHORIZATION, v.parse().unwrap());
             }
             m
         };
@@ -547,6 +561,29 @@ mod tests {
         let small = service(ServiceConfig { max_message_bytes: 200 << 10, ..Default::default() });
         let e = small.check_frame_size(&pb::Start { width: 256, height: 256, ..start() }).unwrap_err();
         assert!(e.message().contains("--max-message-mib"), "{}", e.message());
+    }
+
+    /// Issue 12 item 3: sessions draw their estimated memory from the server's budget; one
+    /// that does not fit is refused with RESOURCE_EXHAUSTED naming the flag, and a finished
+    /// session gives its share back.
+    #[test]
+    fn sessions_draw_from_the_memory_budget() {
+        let s = SessionSettings::default();
+        let one = SessionMemory::estimate(512, 512, DEFAULT_POINTS_PER_PIXEL, &s, rayon::current_num_threads()).total();
+        let svc = service(ServiceConfig { memory: MemoryBudget::new(one * 5 / 2), ..Default::default() });
+        let st = pb::Start { width: 512, height: 512, ..start() };
+        let a = svc.grant_memory(&st, &s).unwrap();
+        let b = svc.grant_memory(&st, &s).unwrap();
+        let e = svc.grant_memory(&st, &s).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+        assert!(e.message().contains("512x512") && e.message().contains("--max-memory-mib"), "{}", e.message());
+        let e = svc.grant_memory(&pb::Start { width: 4096, height: 4096, ..start() }, &s).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+        drop(a);
+        let c = svc.grant_memory(&st, &s).expect("room again once a session ends");
+        assert_eq!(svc.cfg.memory.used(), 2 * one);
+        drop((b, c));
+        assert_eq!(svc.cfg.memory.used(), 0);
     }
 
     #[test]

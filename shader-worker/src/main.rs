@@ -2,7 +2,8 @@
 //! grpc.health.v1, prints `metrics <addr>` (with `--metrics-listen`) and then
 //! `listening <addr>` on stdout once bound, logs to stderr. See `edgepoint_worker::cli`.
 use clap::Parser;
-use edgepoint_proto::net::{check_exposure, server_tls, Protection};
+use edgepoint_proto::auth::{read_token_file, RequireToken};
+use edgepoint_proto::net::{check_worker_exposure, server_mutual_tls, server_tls};
 use edgepoint_proto::shader_worker_server::ShaderWorkerServer;
 use edgepoint_worker::cli::WorkerArgs;
 use edgepoint_worker::service::WorkerService;
@@ -15,27 +16,31 @@ const DRAIN_GRACE: Duration = Duration::from_secs(10);
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
+    edgepoint_proto::logging::init("info");
     let args = WorkerArgs::parse();
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
-    let tls = match (&args.tls_cert, &args.tls_key) {
-        (Some(c), Some(k)) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
+    let tls = match (&args.tls_cert, &args.tls_key, &args.tls_client_ca) {
+        (Some(c), Some(k), Some(ca)) => Some(server_mutual_tls(c, k, ca).map_err(anyhow::Error::msg)?),
+        (Some(c), Some(k), None) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
         _ => None,
+    };
+    let tokens = match &args.token_file {
+        Some(p) => Some(Arc::new(read_token_file(p).map_err(anyhow::Error::msg)?)),
+        None => None,
     };
     let service = WorkerService::new(args.scene_cache as usize, threads)?;
     let listener = tokio::net::TcpListener::bind(&args.listen)
         .await
         .map_err(|e| anyhow::anyhow!("cannot listen on {}: {e}", args.listen))?;
     let addr = listener.local_addr()?;
-    check_exposure(addr, Protection { tls: tls.is_some(), token: None, insecure: args.insecure }).map_err(anyhow::Error::msg)?;
+    let authenticated = tokens.is_some() || args.tls_client_ca.is_some();
+    check_worker_exposure(addr, tls.is_some(), authenticated, args.insecure).map_err(anyhow::Error::msg)?;
 
     if let Some(m) = &args.metrics_listen {
         let (metrics, cache) = (service.metrics().clone(), service.cache().clone());
         edgepoint_proto::metrics_http::start(
             m,
+            args.metrics_public,
             Arc::new(move || {
                 metrics.scenes.set(cache.hashes().len() as i64);
                 metrics.encode()
@@ -45,7 +50,8 @@ async fn main() -> anyhow::Result<()> {
     }
     println!("listening {addr}");
     std::io::stdout().flush()?;
-    tracing::info!(%addr, threads, tls = tls.is_some(), "edgepoint-worker serving");
+    tracing::info!(%addr, threads, tls = tls.is_some(), mutual_tls = args.tls_client_ca.is_some(),
+        tokens = tokens.as_ref().map_or(0, |t| t.len()), "edgepoint-worker serving");
 
     let (health, health_service) = tonic_health::server::health_reporter();
     health.set_serving::<ShaderWorkerServer<WorkerService>>().await;
@@ -67,8 +73,11 @@ async fn main() -> anyhow::Result<()> {
     }
     let server = builder
         .add_service(health_service)
-        .add_service(ShaderWorkerServer::new(service).max_decoding_message_size(max).max_encoding_message_size(max))
-        .serve_with_incoming_shutdown(edgepoint_proto::net::no_delay_incoming(listener), signal);
+        .add_service(tonic::service::interceptor::InterceptedService::new(
+            ShaderWorkerServer::new(service).max_decoding_message_size(max).max_encoding_message_size(max),
+            RequireToken::new(tokens, "start the renderer with --worker-token-file FILE holding one of this worker's tokens"),
+        ))
+        .serve_with_incoming_shutdown(edgepoint_proto::net::guarded_incoming(listener), signal);
     tokio::select! {
         r = server => r?,
         _ = async {

@@ -12,7 +12,8 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::f32::consts::FRAC_1_PI;
 
-/// Names of the shaders this worker offers.
+/// Names of the shaders this worker offers: every row of the shared table
+/// ([`edgepoint_proto::shaders::SHADERS`]).
 pub const SHADERS: &[&str] = &["direct"];
 
 /// A parsed shader with its parameters.
@@ -21,52 +22,33 @@ pub enum ShaderSpec {
     Direct(DirectParams),
 }
 
-/// Parameters of the `direct` shader.
+/// Parameters of the `direct` shader (ranges and defaults: the shared table).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DirectParams {
-    /// Shadow rays per area light per sample (`shadow_rays`, default 16, 1..=4096).
+    /// Shadow rays per area light per sample (`shadow_rays`).
     pub shadow_rays: u32,
-    /// Scale of the scene's ambient term (`ambient`, default 1, 0..=100).
+    /// Scale of the scene's ambient term (`ambient`).
     pub ambient: f32,
 }
 
 impl Default for DirectParams {
     fn default() -> Self {
-        DirectParams { shadow_rays: 16, ambient: 1.0 }
+        match ShaderSpec::parse("direct", &HashMap::new()) {
+            Ok(ShaderSpec::Direct(p)) => p,
+            Err(e) => unreachable!("the table's defaults are valid (tested): {e}"),
+        }
     }
 }
 
 impl ShaderSpec {
-    /// Parses a shader name ("" means `direct`) and its parameters; unknown names, unknown
-    /// keys and out-of-range values are errors that list what is valid.
+    /// Parses a shader name ("" means `direct`) and its parameters against the shared
+    /// table; unknown names, unknown keys and out-of-range values are errors that list what
+    /// is valid.
     pub fn parse(name: &str, params: &HashMap<String, f64>) -> Result<ShaderSpec, String> {
-        match name {
-            "" | "direct" => {
-                let mut p = DirectParams::default();
-                for (k, &v) in params {
-                    match k.as_str() {
-                        "shadow_rays" => {
-                            if !(v.is_finite() && (1.0..=4096.0).contains(&v) && v.fract() == 0.0) {
-                                return Err(format!("shader direct: shadow_rays must be a whole number in 1..=4096, got {v}"));
-                            }
-                            p.shadow_rays = v as u32;
-                        }
-                        "ambient" => {
-                            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
-                                return Err(format!("shader direct: ambient must be in 0..=100, got {v}"));
-                            }
-                            p.ambient = v as f32;
-                        }
-                        _ => {
-                            return Err(format!(
-                                "shader direct has no parameter '{k}' (parameters: shadow_rays, ambient)"
-                            ))
-                        }
-                    }
-                }
-                Ok(ShaderSpec::Direct(p))
-            }
-            _ => Err(format!("unknown shader '{name}' (shaders: {})", SHADERS.join(", "))),
+        let p = edgepoint_proto::shaders::resolve(name, params)?;
+        match edgepoint_proto::shaders::shader(name).map(|s| s.name) {
+            Some("direct") => Ok(ShaderSpec::Direct(DirectParams { shadow_rays: p["shadow_rays"] as u32, ambient: p["ambient"] as f32 })),
+            _ => Err(format!("shader '{name}' is in the table but not built into this worker (it offers: {})", SHADERS.join(", "))),
         }
     }
 }

@@ -126,3 +126,16 @@ fn shading_is_reproducible_and_cornell_is_lit() {
     assert!(a.triples.iter().any(|t| t[0] == 0 && t[2] == floor));
     assert!(a.visible.len() >= 6);
 }
+
+/// Issue 12 item 8: the worker offers exactly the shaders of the shared table, and parses
+/// them with the table's ranges and defaults (the server checks `start` against the same).
+#[test]
+fn the_worker_offers_the_shared_table() {
+    let table: Vec<&str> = edgepoint_proto::shaders::SHADERS.iter().map(|s| s.name).collect();
+    assert_eq!(edgepoint_worker::SHADERS, table.as_slice());
+    for s in edgepoint_proto::shaders::SHADERS {
+        ShaderSpec::parse(s.name, &HashMap::new()).unwrap_or_else(|e| panic!("{}: {e}", s.name));
+    }
+    let d = edgepoint_worker::DirectParams::default();
+    assert_eq!((d.shadow_rays, d.ambient), (16, 1.0));
+}

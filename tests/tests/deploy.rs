@@ -8,7 +8,7 @@
 //! The container image itself is not built here (no container engine on the CI machine);
 //! these checks are what can be verified without one.
 use clap::Parser;
-use edgepoint_proto::net::{check_exposure, Protection};
+use edgepoint_proto::net::{check_exposure, check_metrics_exposure, check_worker_exposure, Protection};
 use edgepoint_server::cli::ServerArgs;
 use edgepoint_server::workers::WorkerAddr;
 use edgepoint_worker::cli::WorkerArgs;
@@ -179,8 +179,16 @@ fn worker_manifests_agree_with_the_worker_binary() {
     assert_eq!(argv[0], edgepoint_viewer::local::WORKER_BIN);
     let args = WorkerArgs::try_parse_from(&argv).unwrap_or_else(|e| panic!("edgepoint-worker rejects {argv:?}: {e}"));
     let listen: SocketAddr = args.listen.parse().unwrap();
-    check_exposure(listen, Protection { tls: args.tls_cert.is_some(), token: None, insecure: args.insecure })
+    check_worker_exposure(listen, args.tls_cert.is_some(), args.token_file.is_some() || args.tls_client_ca.is_some(), args.insecure)
         .unwrap_or_else(|e| panic!("the worker would refuse to start: {e}"));
+    check_metrics_exposure(args.metrics_listen.as_deref().expect("metrics").parse().unwrap(), args.metrics_public)
+        .unwrap_or_else(|e| panic!("the worker would refuse to start: {e}"));
+    let token = args.token_file.as_ref().expect("workers authenticate the renderer").display().to_string();
+    let mounts = list(&c["volumeMounts"], "volumeMounts");
+    let vol = mounts.iter().find(|m| token.starts_with(&format!("{}/", s(&m["mountPath"], "mountPath")))).expect("the token file is mounted");
+    let volumes = list(&dep["spec"]["template"]["spec"]["volumes"], "volumes");
+    let v = volumes.iter().find(|v| v["name"] == vol["name"]).expect("its volume");
+    assert_eq!(v["secret"]["secretName"].as_str(), Some("edgepoint-worker-token"));
     let grpc = named_port(c, "grpc");
     assert_eq!(listen.port(), grpc, "--listen port == containerPort grpc");
     let metrics = port_of(args.metrics_listen.as_deref().expect("workers export metrics"));
@@ -239,6 +247,8 @@ fn server_manifests_agree_with_the_server_binary() {
     let listen: SocketAddr = args.listen.parse().unwrap();
     check_exposure(listen, Protection { tls: args.tls_cert.is_some(), token: Some(args.token_file.is_some()), insecure: args.insecure })
         .unwrap_or_else(|e| panic!("the server would refuse to start: {e}"));
+    check_metrics_exposure(args.metrics_listen.as_deref().expect("metrics").parse().unwrap(), args.metrics_public)
+        .unwrap_or_else(|e| panic!("the server would refuse to start: {e}"));
     assert!(!args.insecure, "the renderer faces viewers: TLS and tokens, not --insecure");
     let grpc = named_port(c, "grpc");
     assert_eq!(listen.port(), grpc);
@@ -268,7 +278,7 @@ fn server_manifests_agree_with_the_server_binary() {
         .map(|m| (s(&m["name"], "mount name").to_string(), s(&m["mountPath"], "mountPath").to_string()))
         .collect();
     let volumes = list(&dep["spec"]["template"]["spec"]["volumes"], "volumes");
-    for file in [&args.tls_cert, &args.tls_key, &args.token_file] {
+    for file in [&args.tls_cert, &args.tls_key, &args.token_file, &args.worker_token_file] {
         let file = file.as_ref().expect("TLS and token files are configured").display().to_string();
         let (vol, _) = mounts.iter().find(|(_, p)| file.starts_with(&format!("{p}/"))).unwrap_or_else(|| panic!("{file} is not under a volumeMount"));
         let v = volumes.iter().find(|v| v["name"].as_str() == Some(vol)).unwrap_or_else(|| panic!("no volume {vol}"));
@@ -289,7 +299,8 @@ fn compose_and_dockerfile_agree_with_the_binaries() {
     let w_argv = strings(&worker["command"], "worker command");
     let w = WorkerArgs::try_parse_from(&w_argv).unwrap_or_else(|e| panic!("edgepoint-worker rejects {w_argv:?}: {e}"));
     let w_listen: SocketAddr = w.listen.parse().unwrap();
-    check_exposure(w_listen, Protection { tls: w.tls_cert.is_some(), token: None, insecure: w.insecure }).unwrap();
+    check_worker_exposure(w_listen, w.tls_cert.is_some(), w.token_file.is_some(), w.insecure).unwrap();
+    check_metrics_exposure(w.metrics_listen.as_deref().unwrap().parse().unwrap(), w.metrics_public).unwrap();
     assert!(worker["deploy"]["replicas"].as_i64().unwrap() >= 2, "several workers");
     let exposed = strings(&worker["expose"], "expose");
     assert!(exposed.contains(&w_listen.port().to_string()));
@@ -299,6 +310,14 @@ fn compose_and_dockerfile_agree_with_the_binaries() {
     let sv = ServerArgs::try_parse_from(&s_argv).unwrap_or_else(|e| panic!("edgepoint-server rejects {s_argv:?}: {e}"));
     let s_listen: SocketAddr = sv.listen.parse().unwrap();
     check_exposure(s_listen, Protection { tls: sv.tls_cert.is_some(), token: Some(sv.token_file.is_some()), insecure: sv.insecure }).unwrap();
+    check_metrics_exposure(sv.metrics_listen.as_deref().unwrap().parse().unwrap(), sv.metrics_public).unwrap();
+    // The renderer sends the token the workers accept, both from the compose secret.
+    assert_eq!(sv.worker_token_file, w.token_file, "one shared worker token");
+    let secret = compose["secrets"]["worker_token"]["file"].as_str().expect("the worker_token secret");
+    assert_eq!(w.token_file.as_ref().unwrap().display().to_string(), "/run/secrets/worker_token");
+    for svc in [worker, server] {
+        assert!(strings(&svc["secrets"], "secrets").iter().any(|s| s == "worker_token"), "{secret} is given to both services");
+    }
     // Compose's DNS answers the service name with every replica.
     let dns = WorkerAddr::parse(&sv.worker_dns[0]).unwrap();
     assert_eq!(dns.host, "worker", "--worker-dns names the worker service");

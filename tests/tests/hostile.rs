@@ -104,3 +104,36 @@ async fn garbage_on_every_port_leaves_everything_serving() {
     }
     drop(idle);
 }
+
+/// Issue 12 item 10: a connection that never speaks, or stops halfway through the HTTP/2
+/// preface, is closed by the server and the worker after their handshake time instead of
+/// being held forever. (30 s is only the liveness guard; they close after 10 s.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silent_and_half_open_connections_are_closed() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let cl = tokio::task::block_in_place(|| cluster_with(1, |_| {})).expect("cluster starts");
+    let mut pending = Vec::new();
+    for (port, addr) in [("server", cl.server_addr()), ("worker", cl.worker_addrs()[0])] {
+        let silent = tokio::net::TcpStream::connect(addr).await.unwrap();
+        let mut half = tokio::net::TcpStream::connect(addr).await.unwrap();
+        half.write_all(&PREFACE[..12]).await.unwrap();
+        pending.push((port, "silent", silent));
+        pending.push((port, "half a preface", half));
+    }
+    let t0 = Instant::now();
+    for (port, what, mut s) in pending {
+        let mut buf = [0u8; 256];
+        let closed = tokio::time::timeout(Duration::from_secs(30), async {
+            loop {
+                match s.read(&mut buf).await {
+                    // The server's own SETTINGS frame may come first; then the close.
+                    Ok(n) if n > 0 => continue,
+                    _ => break,
+                }
+            }
+        })
+        .await;
+        assert!(closed.is_ok(), "the {port} kept a {what} connection open for 30 s");
+    }
+    eprintln!("closed after {:.1} s", t0.elapsed().as_secs_f64());
+}

@@ -40,7 +40,8 @@ impl Drop for Scratch {
 }
 
 /// A test CA and a certificate it issued for `localhost` and 127.0.0.1: ca.pem, cert.pem,
-/// key.pem in `dir`.
+/// key.pem in `dir`; and a client certificate it issued for the renderer (mutual TLS):
+/// client.pem, client-key.pem.
 fn pki(dir: &Scratch) {
     let mut ca = CertificateParams::new(Vec::<String>::new()).unwrap();
     ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
@@ -51,6 +52,10 @@ fn pki(dir: &Scratch) {
     dir.write("ca.pem", ca.pem());
     dir.write("cert.pem", leaf.pem());
     dir.write("key.pem", key.serialize_pem());
+    let ckey = KeyPair::generate().unwrap();
+    let client = CertificateParams::new(vec!["edgepoint-renderer".to_string()]).unwrap().signed_by(&ckey, &ca).unwrap();
+    dir.write("client.pem", client.pem());
+    dir.write("client-key.pem", ckey.serialize_pem());
 }
 
 fn with_token(token: &str) -> ConnectOptions {
@@ -162,7 +167,7 @@ async fn tls_protects_the_viewer_port() {
     .expect("cluster starts");
     let port = cl.server_addr().port();
     let https = format!("https://localhost:{port}");
-    let good = ConnectOptions { token: Some(TOKEN.into()), tls_ca: Some(dir.0.join("ca.pem")), tls_domain: None };
+    let good = ConnectOptions { token: Some(TOKEN.into()), tls_ca: Some(dir.0.join("ca.pem")), ..Default::default() };
     let (mut c, _) = SessionClient::connect_with(&https, start_builtin("cornell", 64, 48), &good).await.expect("TLS session");
     let mut last = Instant::now();
     frames_until(&mut c, &mut last, WAIT, |_, s| s.samples > 0).await.unwrap();
@@ -223,6 +228,64 @@ async fn tls_between_the_server_and_its_workers() {
     assert!(seen.samples > 0);
 }
 
+/// Issue 12 item 5: a worker with tokens refuses calls without one, and a renderer given the
+/// token shades through it; a worker requiring mutual TLS serves only a renderer presenting
+/// a certificate of its CA, even on a non-loopback address.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn workers_authenticate_their_renderer() {
+    use edgepoint_proto::shader_worker_client::ShaderWorkerClient;
+    let dir = Scratch::new("worker-auth");
+    pki(&dir);
+    let tokens = dir.write("worker-tokens", format!("# renderers\n{TOKEN}\n"));
+    let tokens = tokens.display().to_string();
+    let worker = tokio::task::block_in_place(|| Spawned::start("edgepoint-worker", &["--listen", "127.0.0.1:0", "--threads", "1", "--token-file", &tokens])).unwrap();
+    let waddr = worker.addr.unwrap_or_else(|| panic!("worker did not start: {}", worker.stderr()));
+    let mut anonymous = ShaderWorkerClient::connect(format!("http://{waddr}")).await.unwrap();
+    let e = anonymous.info(pb::InfoRequest {}).await.unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated);
+    assert!(e.message().contains("--worker-token-file"), "{}", e.message());
+    let e = anonymous.load_scene(pb::LoadSceneRequest { source: Some(pb::builtin_source("cornell")), expect_hash: String::new() }).await.unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated, "no scene loads without the token");
+    let server = tokio::task::block_in_place(|| {
+        Spawned::start("edgepoint-server", &["--listen", "127.0.0.1:0", "--worker", &format!("http://{waddr}"), "--worker-token-file", &tokens])
+    })
+    .unwrap();
+    let saddr = server.addr.unwrap_or_else(|| panic!("server did not start: {}", server.stderr()));
+    let (mut c, _) = SessionClient::connect(&format!("http://{saddr}"), start_builtin("cornell", 64, 48)).await.expect("session");
+    let mut last = Instant::now();
+    frames_until(&mut c, &mut last, WAIT, |_, s| s.samples > 0).await.expect("the renderer with the token gets samples");
+
+    // Mutual TLS on all addresses.
+    let (cert, key, ca) = (dir.path("cert.pem"), dir.path("key.pem"), dir.path("ca.pem"));
+    let mtls = tokio::task::block_in_place(|| {
+        Spawned::start("edgepoint-worker", &["--listen", "0.0.0.0:0", "--threads", "1", "--tls-cert", &cert, "--tls-key", &key, "--tls-client-ca", &ca])
+    })
+    .unwrap();
+    let maddr = mtls.addr.unwrap_or_else(|| panic!("an mTLS worker may listen beyond loopback: {}", mtls.stderr()));
+    let murl = format!("https://localhost:{}", maddr.port());
+    let no_cert = edgepoint_proto::net::client_tls(Some(Path::new(&ca)), None).unwrap();
+    let channel = tonic::transport::Endpoint::from_shared(murl.clone()).unwrap().tls_config(no_cert).unwrap();
+    let refused = match channel.connect().await {
+        Ok(ch) => ShaderWorkerClient::new(ch).info(pb::InfoRequest {}).await.is_err(),
+        Err(_) => true,
+    };
+    assert!(refused, "a client without a certificate is refused");
+    let server = tokio::task::block_in_place(|| {
+        Spawned::start(
+            "edgepoint-server",
+            &[
+                "--listen", "127.0.0.1:0", "--worker", &murl, "--worker-tls-ca", &ca,
+                "--worker-tls-cert", &dir.path("client.pem"), "--worker-tls-key", &dir.path("client-key.pem"),
+            ],
+        )
+    })
+    .unwrap();
+    let saddr = server.addr.unwrap_or_else(|| panic!("server did not start: {}", server.stderr()));
+    let (mut c, _) = SessionClient::connect(&format!("http://{saddr}"), start_builtin("cornell", 64, 48)).await.expect("session");
+    let mut last = Instant::now();
+    frames_until(&mut c, &mut last, WAIT, |_, s| s.samples > 0).await.expect("the renderer with its certificate gets samples");
+}
+
 #[test]
 fn non_loopback_addresses_need_tls_and_tokens_or_insecure() {
     let dir = Scratch::new("exposure");
@@ -253,9 +316,28 @@ fn non_loopback_addresses_need_tls_and_tokens_or_insecure() {
     let mut worker = Spawned::start("edgepoint-worker", &["--listen", "0.0.0.0:0"]).unwrap();
     assert!(worker.addr.is_none());
     worker.wait_exit(Duration::from_secs(20)).expect("it exits");
-    assert!(worker.stderr().contains("--tls-cert") && worker.stderr().contains("--insecure"), "{}", worker.stderr());
-    let worker = Spawned::start("edgepoint-worker", &["--listen", "0.0.0.0:0", "--insecure"]).unwrap();
-    assert!(worker.addr.is_some(), "{}", worker.stderr());
+    assert!(worker.stderr().contains("--tls-cert") && worker.stderr().contains("--token-file"), "{}", worker.stderr());
+    // Issue 12 item 5: beyond loopback a worker must authenticate its renderer; neither
+    // --insecure nor TLS alone is enough.
+    let tokens_arg = tokens.display().to_string();
+    for args in [
+        vec!["--listen", "0.0.0.0:0", "--insecure"],
+        vec!["--listen", "0.0.0.0:0", "--tls-cert", &dir.path("cert.pem"), "--tls-key", &dir.path("key.pem")],
+    ] {
+        let mut w = Spawned::start("edgepoint-worker", &args).unwrap();
+        assert!(w.addr.is_none(), "{args:?} must be refused");
+        w.wait_exit(Duration::from_secs(20)).expect("it exits");
+        assert!(w.stderr().contains("authentication of the renderer") && w.stderr().contains("--token-file"), "{args:?}: {}", w.stderr());
+    }
+    let worker = Spawned::start("edgepoint-worker", &["--listen", "0.0.0.0:0", "--insecure", "--token-file", &tokens_arg]).unwrap();
+    assert!(worker.addr.is_some(), "plaintext with a token on a trusted network: {}", worker.stderr());
+    // Issue 12 item 11: plain-HTTP metrics beyond loopback need --metrics-public.
+    let mut m = Spawned::start("edgepoint-worker", &["--listen", "127.0.0.1:0", "--metrics-listen", "0.0.0.0:0"]).unwrap();
+    assert!(m.addr.is_none());
+    m.wait_exit(Duration::from_secs(20)).expect("it exits");
+    assert!(m.stderr().contains("--metrics-public"), "{}", m.stderr());
+    let m = Spawned::start("edgepoint-server", &["--listen", "127.0.0.1:0", "--metrics-listen", "0.0.0.0:0", "--metrics-public"]).unwrap();
+    assert!(m.addr.is_some() && m.metrics.is_some(), "{}", m.stderr());
 
     let bad_token_file = dir.write("short", "tooshort\n");
     let mut s = Spawned::start("edgepoint-server", &["--token-file", &bad_token_file.display().to_string()]).unwrap();

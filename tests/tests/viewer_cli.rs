@@ -42,3 +42,61 @@ fn viewer_with_a_missing_scene_file_fails_clearly() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/nonexistent/model.ply"), "error names the path: {err}");
 }
+
+/// Issue 12 item 12: when the server dies under a running session the viewer exits non-zero
+/// saying the connection was lost (it used to print `UNKNOWN: h2 protocol error`).
+#[test]
+fn a_dying_server_is_reported_as_a_lost_connection() {
+    let cl = edgepoint_tests::cluster(1).expect("cluster starts");
+    let viewer = edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built");
+    let out = std::env::temp_dir().join(format!("edgepoint-viewer-dies-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let child = Command::new(viewer)
+        .args(["--server", &cl.server_url(), "--headless", "--quiet", "--frames", "0", "--width", "32", "--height", "24"])
+        .arg("--out")
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stats = out.join("stats.jsonl");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !std::fs::read_to_string(&stats).is_ok_and(|s| s.lines().count() >= 3) {
+        assert!(std::time::Instant::now() < deadline, "no frames");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let pid = cl.server_pid().unwrap();
+    unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+    let o = child.wait_with_output().unwrap();
+    drop(cl);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("error: lost the connection to the server"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Issue 12 item 16: the server and the worker write no colour codes into a redirected log.
+#[test]
+fn logs_into_a_pipe_have_no_colour_codes() {
+    let mut logged = String::new();
+    for bin in ["edgepoint-worker", "edgepoint-server"] {
+        let path = edgepoint_viewer::local::find_binary(bin).unwrap();
+        let mut child = Command::new(path)
+            .args(["--listen", "127.0.0.1:0"])
+            .env("RUST_LOG", "info")
+            .env_remove("NO_COLOR")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
+        std::io::BufRead::read_line(&mut out, &mut line).unwrap();
+        assert!(line.starts_with("listening"), "{bin}: {line}");
+        child.kill().unwrap();
+        let o = child.wait_with_output().unwrap();
+        logged.push_str(&String::from_utf8_lossy(&o.stderr));
+    }
+    assert!(logged.contains("INFO"), "info lines were logged: {logged}");
+    assert!(!logged.contains('\x1b'), "colour codes in a piped log: {logged:?}");
+}

@@ -29,6 +29,13 @@ pub enum ClientError {
     /// The session is over; nothing more can be sent.
     #[error("the session is closed")]
     Closed,
+    /// The server did not answer `start` in time.
+    #[error("the server did not answer `start` within {secs} s (a large scene may still be loading: raise --start-timeout-secs)")]
+    StartTimeout { secs: u64 },
+    /// The connection broke under the session (the server exited, or the network failed):
+    /// no status came from the server.
+    #[error("lost the connection to the server (it exited, or the network failed): {0}")]
+    Disconnected(String),
 }
 
 impl ClientError {
@@ -41,9 +48,36 @@ impl ClientError {
     }
 
     fn from_status(s: tonic::Status) -> Self {
+        if is_transport_failure(&s) {
+            use std::error::Error;
+            let mut detail = s.message().to_string();
+            let mut cur = s.source();
+            while let Some(c) = cur {
+                let t = c.to_string();
+                if !detail.contains(&t) {
+                    detail.push_str(&format!(": {t}"));
+                }
+                cur = c.source();
+            }
+            return ClientError::Disconnected(detail);
+        }
         ClientError::Status { code: s.code(), message: s.message().to_string() }
     }
 }
+
+/// Whether a status was made on this side from a broken connection (tonic keeps the
+/// transport error as its source), rather than sent by the server: a server that dies shows
+/// up as `UNKNOWN: h2 protocol error`, which says nothing to a user.
+fn is_transport_failure(s: &tonic::Status) -> bool {
+    use std::error::Error;
+    use tonic::Code::*;
+    matches!(s.code(), Unknown | Unavailable | Internal | Cancelled)
+        && (s.source().is_some() || ["h2 protocol error", "transport error", "error reading a body"].iter().any(|m| s.message().contains(m)))
+}
+
+/// Default time to wait for `started` after sending `start` (the server builds the scene
+/// first: a large file takes a while).
+pub const DEFAULT_START_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// How to reach a server beyond its URL: a bearer token (servers started with
 /// `--token-file` require one) and, for an `https://` URL, the CA to trust and the name to
@@ -53,6 +87,8 @@ pub struct ConnectOptions {
     pub token: Option<String>,
     pub tls_ca: Option<PathBuf>,
     pub tls_domain: Option<String>,
+    /// How long to wait for `started` ([`DEFAULT_START_TIMEOUT`] when `None`).
+    pub start_timeout: Option<Duration>,
 }
 
 /// What the server sends after `started`.
@@ -170,16 +206,22 @@ impl SessionClient {
         if let Some(v) = auth {
             request.metadata_mut().insert(edgepoint_proto::auth::AUTHORIZATION, v);
         }
-        let response = client.session(request).await.map_err(ClientError::from_status)?;
-        let mut inbound = response.into_inner();
-        let started = match inbound.message().await {
-            Ok(Some(pb::ServerMsg { msg: Some(server_msg::Msg::Started(s)) })) => s,
-            Ok(Some(other)) => {
-                return Err(ClientError::Protocol(format!("expected `started` first, got {}", msg_kind(&other))))
-            }
-            Ok(None) => return Err(ClientError::Protocol("the server closed the session before `started`".into())),
-            Err(status) => return Err(ClientError::from_status(status)),
+        let wait = opts.start_timeout.unwrap_or(DEFAULT_START_TIMEOUT);
+        let answer = async {
+            let response = client.session(request).await.map_err(ClientError::from_status)?;
+            let mut inbound = response.into_inner();
+            let started = match inbound.message().await {
+                Ok(Some(pb::ServerMsg { msg: Some(server_msg::Msg::Started(s)) })) => s,
+                Ok(Some(other)) => {
+                    return Err(ClientError::Protocol(format!("expected `started` first, got {}", msg_kind(&other))))
+                }
+                Ok(None) => return Err(ClientError::Protocol("the server closed the session before `started`".into())),
+                Err(status) => return Err(ClientError::from_status(status)),
+            };
+            Ok((inbound, started))
         };
+        let (inbound, started) =
+            tokio::time::timeout(wait, answer).await.map_err(|_| ClientError::StartTimeout { secs: wait.as_secs() })??;
         Ok((SessionClient { sender, inbound }, started))
     }
 
@@ -327,17 +369,21 @@ pub fn scene_source_from_arg_in(arg: &str, data_dir: Option<&Path>) -> anyhow::R
         Some("ply") => Ok(pb::files_source(vec![(main_name, read(path)?)])),
         Some("obj") => {
             let data = read(path)?;
-            let mut files = vec![];
+            let mut files: Vec<(String, Vec<u8>)> = vec![];
             let dir = path.parent().unwrap_or(Path::new(""));
-            for (line_no, name) in obj_mtllibs(&data) {
+            // Only libraries inside the OBJ's directory are sent (never `/etc/passwd` or
+            // `../..`); one that may not be read, or is missing, is a warning here as in the
+            // loader: its materials fall back to the default.
+            for (line_no, name) in edgepoint_scene::load::mtllib_names(&data) {
                 if files.iter().any(|(n, _)| n == &name) {
                     continue;
                 }
-                let p = dir.join(&name);
-                let bytes = std::fs::read(&p).with_context(|| {
-                    format!("{}: line {line_no}: mtllib {name}: cannot read {}", path.display(), p.display())
-                })?;
-                files.push((name, bytes));
+                let bytes = edgepoint_scene::load::mtllib_path(dir, &name)
+                    .and_then(|p| std::fs::read(&p).map_err(|e| format!("cannot read {}: {e}", p.display())));
+                match bytes {
+                    Ok(b) => files.push((name, b)),
+                    Err(e) => tracing::warn!("{}:{line_no}: mtllib {name} not sent: {e}; its materials fall back to the default", path.display()),
+                }
             }
             files.insert(0, (main_name, data));
             Ok(pb::files_source(files))
@@ -355,18 +401,6 @@ fn builtin_names() -> String {
     edgepoint_scene::builtin::BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
 }
 
-/// `(line number, file name)` for every name on every `mtllib` line of an OBJ file.
-fn obj_mtllibs(data: &[u8]) -> Vec<(usize, String)> {
-    let text = String::from_utf8_lossy(data);
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let mut words = line.split_whitespace();
-        if words.next() == Some("mtllib") {
-            out.extend(words.map(|w| (i + 1, w.to_string())));
-        }
-    }
-    out
-}
 
 #[cfg(test)]
 mod tests {
@@ -432,14 +466,33 @@ mod tests {
         let msg = format!("{err:#}");
         assert!(msg.contains("/no/such/dir/bunny.ply"), "{msg}");
 
+        // A missing mtllib is a warning, as in the loader: the OBJ goes alone.
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("m.obj"), b"v 0 0 0\n\nmtllib gone.mtl\n").unwrap();
-        let msg = format!("{:#}", scene_source_from_arg(dir.path().join("m.obj").to_str().unwrap()).unwrap_err());
-        assert!(msg.contains("line 3") && msg.contains("gone.mtl"), "{msg}");
+        let src = scene_source_from_arg(dir.path().join("m.obj").to_str().unwrap()).unwrap();
+        assert_eq!(files_of(&src).len(), 1);
 
         // A relative path with a separator is a file even without an extension.
         let msg = format!("{:#}", scene_source_from_arg("scenes/cornell").unwrap_err());
         assert!(msg.contains("scenes/cornell") && msg.contains(".ply"), "{msg}");
+    }
+
+    /// Issue 12 item 6: an OBJ naming a library outside its directory (absolute, `..`, or a
+    /// link out) does not make the viewer send that file.
+    #[test]
+    fn mtllibs_outside_the_objs_directory_are_not_sent() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        std::fs::create_dir_all(&scene).unwrap();
+        std::fs::write(dir.path().join("secret.mtl"), b"newmtl secret\n").unwrap();
+        std::fs::write(scene.join("ok.mtl"), b"newmtl ok\n").unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(dir.path().join("secret.mtl"), scene.join("link.mtl")).unwrap();
+        let obj = b"mtllib /etc/passwd ../secret.mtl link.mtl ok.mtl\nv 0 0 0\n";
+        std::fs::write(scene.join("m.obj"), obj).unwrap();
+        let src = scene_source_from_arg(scene.join("m.obj").to_str().unwrap()).unwrap();
+        let names: Vec<String> = files_of(&src).into_iter().map(|f| f.0).collect();
+        assert_eq!(names, ["m.obj", "ok.mtl"]);
     }
 
     #[test]
@@ -453,6 +506,14 @@ mod tests {
         let e = ClientError::from_status(tonic::Status::invalid_argument("bunny.ply: face 12: index 99 out of range"));
         assert_eq!(e.to_string(), "INVALID_ARGUMENT: bunny.ply: face 12: index 99 out of range");
         assert_eq!(e.code(), Some(tonic::Code::InvalidArgument));
+        // Issue 12 item 12: a broken connection is said to be one.
+        let broken = tonic::Status::from_error(Box::new(std::io::Error::new(std::io::ErrorKind::ConnectionReset, "connection reset by peer")));
+        let e = ClientError::from_status(broken);
+        assert!(e.to_string().starts_with("lost the connection to the server") && e.to_string().contains("reset"), "{e}");
+        let h2 = ClientError::from_status(tonic::Status::unknown("h2 protocol error: error reading a body from connection"));
+        assert!(matches!(h2, ClientError::Disconnected(_)), "{h2}");
+        let sent = ClientError::from_status(tonic::Status::unavailable("the renderer is shutting down"));
+        assert_eq!(sent.to_string(), "UNAVAILABLE: the renderer is shutting down", "a status the server sent stays as it is");
     }
 
     #[test]

@@ -266,16 +266,23 @@ pub struct HeadlessWriter {
     stats: BufWriter<File>,
     echo_stdout: bool,
     meter: FrameMeter,
+    last: Option<FrameStats>,
 }
 
 impl HeadlessWriter {
     /// Creates `dir` (and parents) and a fresh `stats.jsonl` in it. With `echo_stdout`,
-    /// every stats line is also printed on stdout.
+    /// every stats line is also printed on stdout (`--stats-stdout`).
     pub fn create(dir: &Path, echo_stdout: bool) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
         let path = dir.join(STATS_FILE);
         let f = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
-        Ok(HeadlessWriter { dir: dir.to_path_buf(), stats: BufWriter::new(f), echo_stdout, meter: FrameMeter::new() })
+        Ok(HeadlessWriter { dir: dir.to_path_buf(), stats: BufWriter::new(f), echo_stdout, meter: FrameMeter::new(), last: None })
+    }
+
+    /// One line saying what the run wrote: frames, time, frame rate, the last frame's server
+    /// figures, and where the files are.
+    pub fn summary(&self) -> String {
+        summary_line(self.meter.count(), self.last.as_ref(), Some(&self.dir))
     }
 
     /// The output directory.
@@ -331,8 +338,26 @@ impl HeadlessWriter {
             // A closed stdout (piped into `head`) must not end the run.
             let _ = writeln!(out, "{line}");
         }
+        self.last = Some(stats.clone());
         Ok(stats)
     }
+}
+
+/// The end-of-run line: `120 frames 512x512 in 4.1 s (29.3 fps); last frame: 4096 samples,
+/// 18.2 ms on the server; frames and stats.jsonl in edgepoint-frames`.
+pub fn summary_line(frames: u64, last: Option<&FrameStats>, dir: Option<&Path>) -> String {
+    let mut s = format!("{frames} frames");
+    if let Some(l) = last {
+        let rate = if l.received_s > 0.0 && frames > 1 { (frames - 1) as f64 / l.received_s } else { 0.0 };
+        s.push_str(&format!(
+            " {}x{} in {:.1} s ({rate:.1} fps); last frame: {} samples, {:.1} ms on the server",
+            l.width, l.height, l.received_s, l.samples_used, l.total_ms
+        ));
+    }
+    if let Some(d) = dir {
+        s.push_str(&format!("; frames and {STATS_FILE} in {}", d.display()));
+    }
+    s
 }
 
 #[cfg(test)]
@@ -397,6 +422,19 @@ mod tests {
         assert_eq!(v["reconstruction"], "epr");
         assert_eq!(v["live_workers"], 2);
         assert!((v["interval_ms"].as_f64().unwrap() - 50.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_summary_names_frames_rate_and_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = HeadlessWriter::create(dir.path(), false).unwrap();
+        let t = Instant::now();
+        for i in 0..3 {
+            w.write_frame(&qoi_frame(i, 6, 4, 10), t + Duration::from_millis(100 * i)).unwrap();
+        }
+        let s = w.summary();
+        assert!(s.starts_with("3 frames 6x4 in ") && s.contains("samples") && s.contains(&dir.path().display().to_string()), "{s}");
+        assert!(!s.contains('\n'));
     }
 
     #[test]

@@ -702,6 +702,79 @@ fn lower_priority(cmd: &mut Command, nice: i32) {
 #[cfg(not(unix))]
 fn lower_priority(_cmd: &mut Command, _nice: i32) {}
 
+/// How to build the server and the worker when this viewer was started by `cargo run`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CargoBuild {
+    pub cargo: PathBuf,
+    /// Arguments after `cargo`: `build -p edgepoint-server -p edgepoint-worker` and the
+    /// viewer's own profile.
+    pub args: Vec<String>,
+    /// Where to run it: the viewer's package directory (cargo finds the workspace).
+    pub dir: PathBuf,
+    /// The viewer's target directory, so the binaries land next to it.
+    pub target_dir: PathBuf,
+}
+
+/// The build that makes the viewer's `edgepoint-server` and `edgepoint-worker` when the
+/// viewer runs under `cargo run -p edgepoint-viewer` — cargo tells a program it runs by
+/// setting `CARGO` (its own path) and the package's `CARGO_PKG_NAME` and
+/// `CARGO_MANIFEST_DIR` — and nothing said where the binaries are (`--bin-dir`,
+/// [`BIN_DIR_ENV`]). `None` otherwise: an installed viewer, or one started by a test or
+/// another program, never builds anything. `env` reads the environment; `exe` is the
+/// viewer's path (`target/<profile>/edgepoint-viewer`).
+pub fn cargo_build_plan(env: &dyn Fn(&str) -> Option<String>, exe: &Path, bin_dir: Option<&Path>) -> Option<CargoBuild> {
+    if bin_dir.is_some() || env(BIN_DIR_ENV).is_some_and(|d| !d.is_empty()) {
+        return None;
+    }
+    let cargo = env("CARGO")?;
+    if env("CARGO_PKG_NAME")? != env!("CARGO_PKG_NAME") {
+        return None;
+    }
+    let dir = PathBuf::from(env("CARGO_MANIFEST_DIR")?);
+    let profile_dir = exe.parent()?;
+    let profile = profile_dir.file_name()?.to_str()?.to_string();
+    let target_dir = profile_dir.parent()?.to_path_buf();
+    let mut args: Vec<String> = ["build", "-p", SERVER_BIN, "-p", WORKER_BIN].map(String::from).into();
+    match profile.as_str() {
+        "debug" => {}
+        "release" => args.push("--release".into()),
+        other => args.extend(["--profile".to_string(), other.to_string()]),
+    }
+    Some(CargoBuild { cargo: PathBuf::from(cargo), args, dir, target_dir })
+}
+
+/// Under `cargo run` (see [`cargo_build_plan`]), builds `edgepoint-server` and
+/// `edgepoint-worker` with the viewer's cargo, profile and target directory before a local
+/// cluster starts, so `cargo run --release -p edgepoint-viewer` works on a fresh clone
+/// without the viewer carrying the renderer and the shaders itself. Cargo decides what is
+/// stale (a second run costs a second); its progress shows on stderr. Returns whether it
+/// built.
+pub fn build_under_cargo(bin_dir: Option<&Path>) -> Result<bool> {
+    let exe = std::env::current_exe().context("locating this executable")?;
+    let Some(plan) = cargo_build_plan(&|k| std::env::var(k).ok(), &exe, bin_dir) else { return Ok(false) };
+    tracing::info!(
+        "building {SERVER_BIN} and {WORKER_BIN} for the local cluster: {} {} (the first build takes a few minutes)",
+        plan.cargo.display(),
+        plan.args.join(" ")
+    );
+    let status = Command::new(&plan.cargo)
+        .args(&plan.args)
+        .current_dir(&plan.dir)
+        .env("CARGO_TARGET_DIR", &plan.target_dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::inherit())
+        .stderr(Stdio::inherit())
+        .status()
+        .with_context(|| format!("running {}", plan.cargo.display()))?;
+    if !status.success() {
+        bail!(
+            "`cargo {}` failed ({status}); its output is above. Build them yourself, or point --bin-dir at existing binaries",
+            plan.args.join(" ")
+        );
+    }
+    Ok(true)
+}
+
 /// Finds an edgepoint binary: [`BIN_DIR_ENV`] (`EDGEPOINT_BIN_DIR`), the directory of the
 /// current executable, that directory's parent (test executables live in
 /// `target/<profile>/deps`), then `PATH`. The error lists every place it looked.
@@ -775,7 +848,30 @@ fn is_executable(p: &Path) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::strip_ansi;
+    use super::*;
+
+    #[test]
+    fn cargo_run_of_the_viewer_builds_server_and_worker_with_its_profile() {
+        let env = |vars: &'static [(&'static str, &'static str)]| move |k: &str| vars.iter().find(|(n, _)| *n == k).map(|(_, v)| v.to_string());
+        let run_by_cargo: &[(&str, &str)] = &[("CARGO", "/c/bin/cargo"), ("CARGO_PKG_NAME", "edgepoint-viewer"), ("CARGO_MANIFEST_DIR", "/src/ep/viewer")];
+        let exe = Path::new("/tmp/t/release/edgepoint-viewer");
+        let plan = cargo_build_plan(&env(run_by_cargo), exe, None).expect("a plan under cargo run");
+        assert_eq!(plan.cargo, Path::new("/c/bin/cargo"));
+        assert_eq!(plan.args, ["build", "-p", "edgepoint-server", "-p", "edgepoint-worker", "--release"]);
+        assert_eq!((plan.dir.as_path(), plan.target_dir.as_path()), (Path::new("/src/ep/viewer"), Path::new("/tmp/t")));
+        let debug = cargo_build_plan(&env(run_by_cargo), Path::new("/x/target/debug/edgepoint-viewer"), None).unwrap();
+        assert!(!debug.args.contains(&"--release".to_string()));
+        let custom = cargo_build_plan(&env(run_by_cargo), Path::new("/x/target/bench/edgepoint-viewer"), None).unwrap();
+        assert!(custom.args.ends_with(&["--profile".to_string(), "bench".to_string()]));
+        // Not under cargo run of the viewer: an installed viewer, a test running it, or
+        // binaries named explicitly.
+        assert!(cargo_build_plan(&env(&[]), exe, None).is_none());
+        let test: &[(&str, &str)] = &[("CARGO", "/c/bin/cargo"), ("CARGO_PKG_NAME", "edgepoint-tests"), ("CARGO_MANIFEST_DIR", "/src/ep/tests")];
+        assert!(cargo_build_plan(&env(test), exe, None).is_none());
+        assert!(cargo_build_plan(&env(run_by_cargo), exe, Some(Path::new("/bin"))).is_none());
+        let with_env: &[(&str, &str)] = &[("CARGO", "/c"), ("CARGO_PKG_NAME", "edgepoint-viewer"), ("CARGO_MANIFEST_DIR", "/v"), ("EDGEPOINT_BIN_DIR", "/b")];
+        assert!(cargo_build_plan(&env(with_env), exe, None).is_none());
+    }
 
     #[test]
     fn strips_colour_codes_only() {

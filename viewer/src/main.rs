@@ -12,7 +12,6 @@ use edgepoint_viewer::camera_path::{parse_camera_spec, read_path, suggested_orbi
 use edgepoint_viewer::script::{CameraPlan, Script, ScriptStep};
 use edgepoint_viewer::window::{display_available, ShownFrame, ToWindow, ViewerWindow, WindowExit, WindowSetup, KEY_HELP};
 use edgepoint_viewer::{scene_source_from_arg_in, ConnectOptions, Event, ReconstructionArgs, SessionClient};
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -22,6 +21,8 @@ use tokio::sync::watch;
 
 /// Output directory of a headless run when --out is not given.
 const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
+/// Frames of a headless run when --frames is not given.
+const DEFAULT_HEADLESS_FRAMES: u64 = 300;
 
 /// View frames from an edgepoint render server (edge-and-point rendering, Bala et al. 2003).
 ///
@@ -29,11 +30,12 @@ const DEFAULT_OUT_DIR: &str = "edgepoint-frames";
 /// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
 /// without --headless, frames show in a window that the mouse and keys drive (listed below;
 /// H or F1 shows them in the window); otherwise each frame is written as
-/// OUT/frame_00001.png with one JSON line of stats per frame in OUT/stats.jsonl (also
-/// printed on stdout unless --quiet). Logs go to stderr, filtered by RUST_LOG (default
-/// info). Ctrl-C ends the run cleanly.
+/// OUT/frame_00001.png with one JSON line of stats per frame in OUT/stats.jsonl, 300 frames
+/// unless --frames says otherwise, and one summary line on stdout at the end (per-frame
+/// lines too with --stats-stdout). Logs go to stderr, filtered by RUST_LOG (default info).
+/// Ctrl-C ends the run cleanly.
 #[derive(Debug, Parser)]
-#[command(name = "edgepoint-viewer", version, after_help = KEY_HELP)]
+#[command(name = "edgepoint-viewer", version, after_help = format!("{KEY_HELP}\n\n{}", edgepoint_proto::shaders::help_text()))]
 struct Args {
     /// Connect to a running edgepoint-server at URL (e.g. http://127.0.0.1:50051) instead
     /// of starting a local cluster.
@@ -110,11 +112,12 @@ struct Args {
     #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: u32,
 
-    /// Shader the workers run for each sample (e.g. direct).
+    /// Shader the workers run for each sample (listed below).
     #[arg(long, value_name = "NAME", default_value = "direct")]
     shader: String,
 
-    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16); repeat for several.
+    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16; listed below); repeat for
+    /// several. The server refuses unknown ones and values out of range.
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
     shader_param: Vec<(String, f64)>,
 
@@ -122,9 +125,11 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Encoding::Qoi)]
     encoding: Encoding,
 
-    /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    frames: u64,
+    /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed). Default:
+    /// 300 frames when headless (about 10 s at 30 fps, so a forgotten run cannot fill the
+    /// disk with PNGs), no limit with a window.
+    #[arg(long, value_name = "N")]
+    frames: Option<u64>,
 
     /// Write every frame as DIR/frame_00001.png ... and per-frame stats to DIR/stats.jsonl.
     /// Headless runs write to ./edgepoint-frames when not given; with a window, only when given.
@@ -182,9 +187,18 @@ struct Args {
     #[command(flatten)]
     reconstruction: ReconstructionArgs,
 
-    /// Do not print the per-frame stats lines on stdout (stats.jsonl is still written).
+    /// Print each frame's stats line (the JSON of stats.jsonl) on stdout as it arrives.
+    #[arg(long, conflicts_with = "quiet")]
+    stats_stdout: bool,
+
+    /// Print nothing on stdout, not even the summary line at the end (stats.jsonl is still
+    /// written).
     #[arg(long)]
     quiet: bool,
+
+    /// Seconds to wait for the server to answer `start` (it builds the scene first).
+    #[arg(long, value_name = "S", default_value_t = edgepoint_viewer::client::DEFAULT_START_TIMEOUT.as_secs(), value_parser = clap::value_parser!(u64).range(1..=86_400))]
+    start_timeout_secs: u64,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -233,14 +247,7 @@ fn parse_positive_f64(s: &str) -> Result<f64, String> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    edgepoint_proto::logging::init("info");
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -291,6 +298,8 @@ fn run(args: Args) -> Result<()> {
                 log_file: args.cluster_log_file.clone(),
                 ..LocalOptions::default()
             };
+            // Under `cargo run`, build the server and worker first (cargo rebuilds what is stale).
+            edgepoint_viewer::local::build_under_cargo(args.bin_dir.as_deref())?;
             Some(LocalCluster::start(opts).context("starting the local cluster")?)
         }
     };
@@ -329,7 +338,12 @@ fn run(args: Args) -> Result<()> {
     if token.is_some() && args.server.is_none() {
         tracing::warn!("the token is not used: the local cluster takes none (give --server URL to use it)");
     }
-    let connect = ConnectOptions { token, tls_ca: args.tls_ca.clone(), tls_domain: args.tls_domain.clone() };
+    let connect = ConnectOptions {
+        token,
+        tls_ca: args.tls_ca.clone(),
+        tls_domain: args.tls_domain.clone(),
+        start_timeout: Some(std::time::Duration::from_secs(args.start_timeout_secs)),
+    };
     tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
     let connected = rt.block_on(async {
         let mut stop = stop_rx.clone();
@@ -424,11 +438,13 @@ fn log_rejected(r: &pb::Rejected) {
     tracing::warn!("the server rejected a message: {code}: {}", r.message);
 }
 
-fn session_ended_early(count: u64, target: u64) -> Result<()> {
-    if target > 0 && count < target {
+/// The server ended the stream: the viewer never asked for that (it stops by closing its
+/// side), so it is an error whatever the frame target.
+fn server_ended_session(count: u64, target: u64) -> Result<()> {
+    if target > 0 {
         bail!("the server ended the session after {count} of {target} frames");
     }
-    Ok(())
+    bail!("the server ended the session after {count} frames");
 }
 
 async fn run_headless(
@@ -439,7 +455,8 @@ async fn run_headless(
     out: PathBuf,
     mut stop: watch::Receiver<bool>,
 ) -> Result<()> {
-    let mut writer = HeadlessWriter::create(&out, !args.quiet)?;
+    let mut writer = HeadlessWriter::create(&out, args.stats_stdout)?;
+    let target = args.frames.unwrap_or(DEFAULT_HEADLESS_FRAMES);
     tracing::info!("writing frames and stats.jsonl to {}", out.display());
     let sender = client.sender();
     loop {
@@ -450,8 +467,7 @@ async fn run_headless(
         let received = Instant::now();
         match ev {
             None => {
-                session_ended_early(writer.frames_written(), args.frames)?;
-                break;
+                server_ended_session(writer.frames_written(), target)?;
             }
             Some(Err(e)) => return Err(e.into()),
             Some(Ok(Event::Rejected(r))) => log_rejected(&r),
@@ -461,7 +477,7 @@ async fn run_headless(
             Some(Ok(Event::Frame(f))) => {
                 writer.write_frame(&f, received)?;
                 record(recorder, &f)?;
-                if args.frames > 0 && writer.frames_written() >= args.frames {
+                if target > 0 && writer.frames_written() >= target {
                     break;
                 }
                 if script.path_finished(f.camera.as_ref()) {
@@ -472,7 +488,9 @@ async fn run_headless(
             }
         }
     }
-    tracing::info!("wrote {} frames to {}", writer.frames_written(), out.display());
+    if !args.quiet {
+        println!("{}", writer.summary());
+    }
     Ok(())
 }
 
@@ -489,7 +507,7 @@ fn run_window(
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
     let mut writer = match &args.out {
-        Some(dir) => Some(HeadlessWriter::create(dir, !args.quiet)?),
+        Some(dir) => Some(HeadlessWriter::create(dir, args.stats_stdout)?),
         None => None,
     };
     let sender = client.sender();
@@ -507,7 +525,7 @@ fn run_window(
         frames_queued: queued.clone(),
     };
     let script = Arc::new(Mutex::new(script));
-    let target = args.frames;
+    let target = args.frames.unwrap_or(0);
     let receiver = {
         let script = script.clone();
         let queued = queued.clone();
@@ -562,7 +580,7 @@ fn run_window(
                 }
             }
             let count = writer.as_ref().map_or(meter.count(), |w| w.frames_written());
-            session_ended_early(count, target)
+            server_ended_session(count, target)
         })
     };
     let exit = window.run(from_session, &stop, setup, || script.lock().unwrap_or_else(|e| e.into_inner()).stop_camera());

@@ -28,7 +28,7 @@ fn help_mentions_every_flag() {
         "--orbit-elevation", "--orbit-start", "--camera", "--camera-path", "--loop-path", "--record-path",
         "--screenshot-dir",
         "--move-object", "--sparseness",
-        "--max-fps", "--quiet",
+        "--max-fps", "--quiet", "--stats-stdout", "--start-timeout-secs",
     ] {
         assert!(help.contains(&format!("{flag} ")) || help.contains(&format!("{flag}\n")), "--help lacks {flag}:\n{help}");
     }
@@ -36,6 +36,16 @@ fn help_mentions_every_flag() {
     for enc in ["qoi", "png", "jpeg", "raw"] {
         assert!(help.contains(enc), "encoding {enc} not listed");
     }
+    // The shared shader table: every shader and parameter with its range (issue 12 item 8).
+    for s in edgepoint_proto::shaders::SHADERS {
+        assert!(help.contains(&format!("{}:", s.name)), "--help lacks shader {}", s.name);
+        for p in s.params {
+            assert!(help.contains(p.name) && help.contains(p.help), "--help lacks parameter {}", p.name);
+        }
+    }
+    assert!(help.contains("300 frames"), "--help says what a headless run without --frames does");
+    // No colour codes in a redirected log (issue 12 item 16).
+    assert!(!String::from_utf8_lossy(&o.stderr).contains('\x1b'));
 }
 
 #[test]
@@ -127,14 +137,20 @@ fn headless_run_writes_pngs_stats_and_drives_the_script() {
         "--server", &mock.url(), "--headless", "--frames", "12", "--width", "40", "--height", "30",
         "--out", out.to_str().unwrap(), "--orbit", "--orbit-speed", "5", "--move-object", "tallbox",
         "--shader-param", "shadow_rays=16", "--sparseness", "80", "--max-fps", "200", "--encoding", "png",
+        "--stats-stdout",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
 
-    // stdout carries the same JSON lines as stats.jsonl.
+    // With --stats-stdout, stdout carries the same JSON lines as stats.jsonl, then the summary.
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stats = stats_lines(&out);
     assert_eq!(stats.len(), 12);
-    assert_eq!(stdout.lines().count(), 12, "{stdout}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 13, "{stdout}");
+    for (line, s) in lines.iter().zip(&stats) {
+        assert_eq!(&serde_json::from_str::<serde_json::Value>(line).unwrap(), s);
+    }
+    assert!(lines[12].starts_with("12 frames 40x30"), "{}", lines[12]);
     for (i, s) in stats.iter().enumerate() {
         let seq = s["sequence"].as_u64().unwrap();
         assert_eq!(s["index"], i as u64 + 1);
@@ -219,6 +235,78 @@ fn a_session_that_ends_early_is_an_error() {
     let o = viewer(&["--server", &mock.url(), "--headless", "--quiet", "--frames", "10", "--out", dir.path().to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("ended the session after 3 of 10 frames"), "{}", stderr(&o));
+    // Issue 12 item 12: also without a frame target (it used to exit 0).
+    let o = viewer(&["--server", &mock.url(), "--headless", "--quiet", "--frames", "0", "--out", dir.path().to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("ended the session after 3 frames"), "{}", stderr(&o));
+}
+
+/// Issue 12 item 16: a headless run without --frames stops at 300 (it used to write PNGs
+/// until the disk filled), and stdout gets one summary line instead of a JSON line per frame.
+#[test]
+fn a_headless_run_without_frames_stops_and_summarises() {
+    let mock = MockServer::start(0);
+    let dir = tempfile::tempdir().unwrap();
+    let o = viewer(&["--server", &mock.url(), "--headless", "--width", "8", "--height", "6", "--out", dir.path().to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(stats_lines(dir.path()).len(), 300);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(stdout.lines().count(), 1, "one line: {stdout}");
+    assert!(stdout.starts_with("300 frames 8x6") && stdout.contains(&dir.path().display().to_string()), "{stdout}");
+    assert!(!stderr(&o).contains('\x1b'), "no colour codes in a redirected log");
+}
+
+/// Issue 12 item 12: a server that never answers `start` is given up on with a clear
+/// message (it used to wait forever).
+#[test]
+fn a_server_that_never_answers_start_times_out() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for s in listener.incoming().flatten() {
+            held.push(s); // accepted, never answered
+        }
+    });
+    let t = std::time::Instant::now();
+    let o = viewer(&["--server", &format!("http://{addr}"), "--headless", "--frames", "1", "--start-timeout-secs", "2"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("did not answer `start` within 2 s"), "{}", stderr(&o));
+    assert!(t.elapsed() < std::time::Duration::from_secs(60), "liveness guard");
+}
+
+/// Issue 12 item 15: under `cargo run` the viewer builds the server and the worker with the
+/// cargo that runs it (here a fake that records its arguments and fails), before anything
+/// starts.
+#[cfg(unix)]
+#[test]
+fn under_cargo_run_the_viewer_builds_its_server_and_worker() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("cargo-args");
+    let fake = dir.path().join("cargo");
+    std::fs::write(&fake, format!("#!/bin/sh\necho \"$PWD $@ $CARGO_TARGET_DIR\" > {}\necho '   Compiling edgepoint-server' >&2\nexit 3\n", log.display())).unwrap();
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let o = Command::new(BIN)
+        .args(["--headless", "--frames", "1"])
+        .env("CARGO", &fake)
+        .env("CARGO_PKG_NAME", "edgepoint-viewer")
+        .env("CARGO_MANIFEST_DIR", dir.path())
+        .env_remove("EDGEPOINT_BIN_DIR")
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("Compiling edgepoint-server"), "cargo's progress shows: {e}");
+    assert!(e.contains("build -p edgepoint-server -p edgepoint-worker") && e.contains("failed"), "{e}");
+    let args = std::fs::read_to_string(&log).unwrap();
+    let exe_dir = Path::new(BIN).parent().unwrap();
+    let profile = exe_dir.file_name().unwrap().to_str().unwrap();
+    assert!(args.starts_with(&dir.path().display().to_string()), "run in the package directory: {args}");
+    assert!(args.contains("build -p edgepoint-server -p edgepoint-worker"), "{args}");
+    assert_eq!(args.contains("--release"), profile == "release", "{args}");
+    assert!(args.trim_end().ends_with(&exe_dir.parent().unwrap().display().to_string()), "same target dir: {args}");
 }
 
 #[test]

@@ -1,20 +1,27 @@
 //! Wavefront OBJ reader (+ MTL colours). `v` and `f` (forms `v`, `v/vt`, `v//vn`, `v/vt/vn`,
 //! negative = relative indices; polygons fan-triangulated); `o` / `g` start a new object and
 //! `usemtl` a new material run: each (object, material) run becomes one scene object.
-//! `mtllib` files are looked up among the given files by base name; MTL `Kd` is the diffuse
-//! colour and `Ke` the emission. Other statements are ignored.
+//! `mtllib` files are looked up among the given files by base name (a library that was not
+//! given is a warning and its materials fall back to the default, as in the viewer, which
+//! sends only the libraries it may: see [`mtllib_path`]); MTL `Kd` is the diffuse colour and
+//! `Ke` the emission. Other statements are ignored.
+//!
+//! Cost is linear in the file: runs are found by a map, not by a search over the runs so
+//! far, and only emissive runs keep their source polygons (for their area lights).
 use crate::error::SceneError;
+use crate::limits::{check_coordinate, MAX_COORDINATE};
 use crate::load::NamedBytes;
 use crate::{Material, Progress};
 use glam::Vec3;
 use std::collections::HashMap;
+use std::path::{Component, Path, PathBuf};
 
 /// One (object, material) run of faces, indices into the file's global vertex list.
 pub struct Run {
     pub name: String,
     pub material: Material,
     pub triangles: Vec<[u32; 3]>,
-    /// Source polygons (for emissive faces that become area lights).
+    /// Source polygons of an emissive run (its faces become area lights); empty otherwise.
     pub polygons: Vec<Vec<u32>>,
 }
 
@@ -29,11 +36,60 @@ fn base_name(s: &str) -> &str {
 
 fn parse_f32(name: &str, ln: usize, tok: Option<&str>, what: &str) -> Result<f32, SceneError> {
     let t = tok.ok_or_else(|| SceneError::line(name, ln, format!("missing {what}")))?;
-    let v: f32 = t.parse().map_err(|_| SceneError::line(name, ln, format!("{what} `{t}` is not a number")))?;
+    let v: f64 = t.parse().map_err(|_| SceneError::line(name, ln, format!("{what} `{t}` is not a number")))?;
     if !v.is_finite() {
         return Err(SceneError::line(name, ln, format!("{what} `{t}` is not finite")));
     }
+    if !(v.abs() <= f32::MAX as f64) {
+        return Err(SceneError::line(name, ln, format!("{what} `{t}` is too large")));
+    }
+    Ok(v as f32)
+}
+
+/// A vertex coordinate: a number within ±[`MAX_COORDINATE`].
+fn parse_coordinate(name: &str, ln: usize, tok: Option<&str>, what: &str) -> Result<f32, SceneError> {
+    let v = parse_f32(name, ln, tok, what)?;
+    check_coordinate(v as f64, MAX_COORDINATE).map_err(|m| SceneError::line(name, ln, format!("{what}: {m}")))?;
     Ok(v)
+}
+
+/// `(line number, name)` for every name on every `mtllib` line of an OBJ file.
+pub fn mtllib_names(data: &[u8]) -> Vec<(usize, String)> {
+    let text = String::from_utf8_lossy(data);
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("");
+        let mut words = line.split_whitespace();
+        if words.next() == Some("mtllib") {
+            out.extend(words.map(|w| (i + 1, w.to_string())));
+        }
+    }
+    out
+}
+
+/// Where the material library `lib` named by an OBJ in directory `dir` may be read from: a
+/// relative path to a file in `dir` or below it. Absolute paths, `..` and symbolic links
+/// that lead out of `dir` are refused, so an OBJ cannot make a client send arbitrary local
+/// files (`mtllib /etc/passwd`) to a server. The error says why.
+pub fn mtllib_path(dir: &Path, lib: &str) -> Result<PathBuf, String> {
+    let rel = Path::new(lib);
+    if rel.is_absolute() || rel.components().any(|c| !matches!(c, Component::Normal(_) | Component::CurDir)) {
+        return Err(format!("`{lib}` is not a relative path inside the OBJ's directory (absolute paths and `..` are refused)"));
+    }
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    let path = dir.join(rel);
+    let (real_dir, real) = match (dir.canonicalize(), path.canonicalize()) {
+        (Ok(d), Ok(p)) => (d, p),
+        (_, Err(e)) => return Err(format!("cannot read {}: {e}", path.display())),
+        (Err(e), _) => return Err(format!("cannot read {}: {e}", dir.display())),
+    };
+    if !real.starts_with(&real_dir) {
+        return Err(format!("{} leads outside the OBJ's directory ({})", path.display(), real.display()));
+    }
+    if !real.is_file() {
+        return Err(format!("{} is not a file", path.display()));
+    }
+    Ok(path)
 }
 
 /// Parses an MTL file into materials by name.
@@ -84,7 +140,9 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
     let mut runs: Vec<Run> = Vec::new();
     let mut obj_name = String::new();
     let mut mat = Material::default();
-    let mut run_open = false;
+    // The run faces go to, and every run by (object, material).
+    let mut open: Option<usize> = None;
+    let mut run_of: HashMap<(String, String), usize> = HashMap::new();
     let mut poly: Vec<u32> = Vec::new();
     let mut done = 0u64;
     for (i, line) in text.lines().enumerate() {
@@ -99,10 +157,13 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
         match w.next() {
             Some("v") => {
                 let v = Vec3::new(
-                    parse_f32(name, ln, w.next(), "x")?,
-                    parse_f32(name, ln, w.next(), "y")?,
-                    parse_f32(name, ln, w.next(), "z")?,
+                    parse_coordinate(name, ln, w.next(), "x")?,
+                    parse_coordinate(name, ln, w.next(), "y")?,
+                    parse_coordinate(name, ln, w.next(), "z")?,
                 );
+                if positions.len() >= u32::MAX as usize - 1 {
+                    return Err(SceneError::line(name, ln, "more vertices than a mesh can index (2^32 - 1)"));
+                }
                 positions.push(v);
             }
             Some("f") => {
@@ -126,32 +187,36 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
                 if poly.len() < 3 {
                     return Err(SceneError::line(name, ln, format!("face has {} vertices; at least 3 are needed", poly.len())));
                 }
-                if !run_open {
+                if open.is_none() {
                     let n = if obj_name.is_empty() { "object".to_string() } else { obj_name.clone() };
                     // The same object and material again continue their earlier run.
-                    match runs.iter().position(|r| r.name == n && r.material.name == mat.name) {
-                        Some(k) => {
-                            let r = runs.remove(k);
-                            runs.push(r);
+                    let key = (n, mat.name.clone());
+                    let k = match run_of.get(&key) {
+                        Some(&k) => k,
+                        None => {
+                            runs.push(Run { name: key.0.clone(), material: mat.clone(), triangles: Vec::new(), polygons: Vec::new() });
+                            run_of.insert(key, runs.len() - 1);
+                            runs.len() - 1
                         }
-                        None => runs.push(Run { name: n, material: mat.clone(), triangles: Vec::new(), polygons: Vec::new() }),
-                    }
-                    run_open = true;
+                    };
+                    open = Some(k);
                 }
-                let run = runs.last_mut().expect("open run");
+                let run = &mut runs[open.expect("a run is open")];
                 for k in 1..poly.len() - 1 {
                     run.triangles.push([poly[0], poly[k], poly[k + 1]]);
                 }
-                run.polygons.push(poly.clone());
+                if run.material.emission.max_element() > 0.0 {
+                    run.polygons.push(poly.clone());
+                }
             }
             Some("o") | Some("g") => {
                 obj_name = w.collect::<Vec<_>>().join(" ");
-                run_open = false;
+                open = None;
             }
             Some("usemtl") => {
                 let m = w.next().ok_or_else(|| SceneError::line(name, ln, "`usemtl` needs a material name"))?;
                 mat = materials.get(m).cloned().unwrap_or_else(|| Material { name: m.to_string(), ..Material::default() });
-                run_open = false;
+                open = None;
             }
             Some("mtllib") => {
                 for lib in w {

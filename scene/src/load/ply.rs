@@ -1,7 +1,14 @@
 //! PLY reader: ASCII, binary little- and big-endian. Reads the `vertex` element's x, y, z
 //! (any numeric type) and the `face` element's `vertex_indices` / `vertex_index` list (any
 //! count and index type); every other element and property is skipped by its declared type.
+//!
+//! Hostile headers are the danger here: no count the header or a list claims is trusted for
+//! a reservation beyond what the bytes left can hold (a record takes at least
+//! [`Element::min_bytes`]), and every record read consumes bytes or fails, so a 121-byte file
+//! can neither ask for terabytes nor for 2^64 iterations: it ends in a "truncated" error at
+//! the first missing record. Data after the last declared element is an error, not ignored.
 use crate::error::{Location, SceneError};
+use crate::limits::{check_coordinate, MAX_COORDINATE};
 use crate::Progress;
 use glam::Vec3;
 
@@ -50,8 +57,28 @@ enum Property {
 #[derive(Debug, Clone)]
 struct Element {
     name: String,
-    count: usize,
+    count: u64,
     props: Vec<Property>,
+    /// Header line that declared it.
+    line: usize,
+}
+
+impl Element {
+    /// The fewest bytes one record can take: binary, its scalars and list counts (a list
+    /// may be empty); ASCII, one character per value plus a separator or line end (an empty
+    /// record is still a line).
+    fn min_bytes(&self, format: Format) -> u64 {
+        match format {
+            Format::Ascii => (2 * self.props.len() as u64).max(1),
+            _ => self
+                .props
+                .iter()
+                .map(|p| match p {
+                    Property::Scalar(_, t) | Property::List(_, t, _) => t.size() as u64,
+                })
+                .sum(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,6 +86,10 @@ enum Format {
     Ascii,
     Le,
     Be,
+}
+
+fn is_face_list(name: &str) -> bool {
+    name == "vertex_indices" || name == "vertex_index"
 }
 
 /// Positions and triangles (polygons fan-triangulated) of a PLY file.
@@ -75,20 +106,33 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
     };
     let xyz = [coord("x")?, coord("y")?, coord("z")?];
     if let Some(face) = elements.iter().find(|e| e.name == "face") {
-        if !face.props.iter().any(|p| matches!(p, Property::List(n, ..) if n == "vertex_indices" || n == "vertex_index")) {
+        if !face.props.iter().any(|p| matches!(p, Property::List(n, ..) if is_face_list(n))) {
             return Err(SceneError::file(name, "PLY `face` element has no `vertex_indices` list"));
         }
     }
-    let total: usize = elements.iter().map(|e| e.count).sum();
-    progress.begin(&format!("parse {name}"), total as u64);
-    let mut r = Reader { name, data: body, pos: 0, base: data.len() - body.len(), format, line: header_lines + 1 };
-    let mut positions = Vec::with_capacity(vertex.count);
+    // Counts are never trusted for a reservation beyond what the bytes after the header can
+    // hold (a record takes at least `min_bytes`), and every record read consumes bytes or
+    // fails, so a count larger than the file ends in a "truncated" error at the first record
+    // that is not there, never in a huge allocation or an endless loop.
+    let fits = |e: &Element| (body.len() as u64 + 1) / e.min_bytes(format).max(1);
+    let total = elements.iter().fold(0u64, |t, e| t.saturating_add(e.count));
+    progress.begin(&format!("parse {name}"), total);
+    let mut r = Reader { data: body, pos: 0, base: data.len() - body.len(), format, line: header_lines + 1 };
+    let mut positions = Vec::with_capacity(vertex.count.min(fits(vertex)) as usize);
     let mut triangles = Vec::new();
     let mut poly: Vec<u32> = Vec::with_capacity(8);
     let mut values = vec![0f64; vertex.props.len()];
     for e in &elements {
+        if e.min_bytes(format) == 0 {
+            // Binary records without properties take no bytes: nothing to read, however
+            // many the header declares.
+            continue;
+        }
         for i in 0..e.count {
-            let at = |reason: String| SceneError::new(name, Location::Element(e.name.clone(), i), reason);
+            let at = |reason: String| SceneError::new(name, Location::Element(e.name.clone(), i as usize), reason);
+            if r.at_end() {
+                return Err(at(r.place(format!("the file ends here, but the header declares {} `{}` records (truncated)", e.count, e.name))));
+            }
             if e.name == "vertex" {
                 for (k, p) in e.props.iter().enumerate() {
                     match p {
@@ -96,32 +140,31 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                         Property::List(_, c, t) => r.skip_list(*c, *t).map_err(&at)?,
                     }
                 }
-                let v = Vec3::new(values[xyz[0]] as f32, values[xyz[1]] as f32, values[xyz[2]] as f32);
-                if !v.is_finite() {
-                    return Err(at(format!("vertex coordinates are not finite ({v})")));
+                for &k in &xyz {
+                    check_coordinate(values[k], MAX_COORDINATE).map_err(|m| at(r.place(m)))?;
                 }
-                positions.push(v);
+                if positions.len() >= u32::MAX as usize - 1 {
+                    return Err(at(r.place("more vertices than a mesh can index (2^32 - 1)".into())));
+                }
+                positions.push(Vec3::new(values[xyz[0]] as f32, values[xyz[1]] as f32, values[xyz[2]] as f32));
             } else if e.name == "face" {
                 for p in &e.props {
                     match p {
-                        Property::List(n, c, t) if n == "vertex_indices" || n == "vertex_index" => {
-                            let count = r.scalar(*c).map_err(&at)?;
-                            if !(0.0..=1_000_000.0).contains(&count) {
-                                return Err(at(format!("face has an invalid vertex count {count}")));
-                            }
+                        Property::List(n, c, t) if is_face_list(n) => {
+                            let count = r.list_len(*c, *t).map_err(&at)?;
                             poly.clear();
-                            for _ in 0..count as usize {
+                            for _ in 0..count {
                                 let idx = r.scalar(*t).map_err(&at)?;
-                                if !(idx >= 0.0 && idx < positions.len().max(vertex.count) as f64 && idx.fract() == 0.0) {
-                                    return Err(at(format!(
+                                if !(idx >= 0.0 && idx < vertex.count.min(u32::MAX as u64 - 1) as f64 && idx.fract() == 0.0) {
+                                    return Err(at(r.place(format!(
                                         "face refers to vertex {idx} but there are {} vertices",
                                         vertex.count
-                                    )));
+                                    ))));
                                 }
                                 poly.push(idx as u32);
                             }
                             if poly.len() < 3 {
-                                return Err(at(format!("face has {} vertices; at least 3 are needed", poly.len())));
+                                return Err(at(r.place(format!("face has {} vertices; at least 3 are needed", poly.len()))));
                             }
                             for k in 1..poly.len() - 1 {
                                 triangles.push([poly[0], poly[k], poly[k + 1]]);
@@ -148,12 +191,10 @@ pub fn read(name: &str, data: &[u8], progress: &dyn Progress) -> Result<(Vec<Vec
                 progress.advance(65536);
             }
         }
-        progress.advance((e.count % 65536) as u64);
+        progress.advance(e.count % 65536);
     }
     progress.end();
-    if triangles.iter().flatten().any(|&v| v as usize >= positions.len()) {
-        return Err(SceneError::file(name, "a face refers to a vertex that does not exist"));
-    }
+    r.end_of_data(&elements).map_err(|(loc, m)| SceneError::new(name, loc, m))?;
     Ok((positions, triangles))
 }
 
@@ -196,8 +237,18 @@ fn header<'a>(name: &str, data: &'a [u8]) -> Result<Header<'a>, SceneError> {
                 let (Some(n), Some(c)) = (w.get(1), w.get(2)) else {
                     return Err(SceneError::line(name, ln, "`element` needs a name and a count"));
                 };
-                let count = c.parse().map_err(|_| SceneError::line(name, ln, format!("element count `{c}` is not a number")))?;
-                elements.push(Element { name: n.to_string(), count, props: Vec::new() });
+                let count = c.parse().map_err(|_| {
+                    SceneError::line(name, ln, format!("element count `{c}` is not a whole number in 0..2^64"))
+                })?;
+                // A second `vertex` (or `face`) would be read with the first one's layout.
+                if let Some(first) = elements.iter().find(|e| e.name == *n) {
+                    return Err(SceneError::line(
+                        name,
+                        ln,
+                        format!("element `{n}` is declared twice (first on line {})", first.line),
+                    ));
+                }
+                elements.push(Element { name: n.to_string(), count, props: Vec::new(), line: ln });
             }
             Some("property") => {
                 let e = elements
@@ -229,7 +280,6 @@ fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
 }
 
 struct Reader<'a> {
-    name: &'a str,
     data: &'a [u8],
     pos: usize,
     base: usize,
@@ -239,6 +289,19 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
+    /// Whether every byte has been read.
+    fn at_end(&self) -> bool {
+        self.pos >= self.data.len()
+    }
+
+    /// `message` with the place in the file (ASCII line or binary byte offset).
+    fn place(&self, message: String) -> String {
+        match self.format {
+            Format::Ascii => format!("line {}: {message}", self.line),
+            _ => format!("byte {}: {message}", self.base + self.pos),
+        }
+    }
+
     fn scalar(&mut self, t: Scalar) -> Result<f64, String> {
         match self.format {
             Format::Ascii => self.ascii_token(),
@@ -251,7 +314,8 @@ impl Reader<'_> {
                 let le = self.format == Format::Le;
                 macro_rules! get {
                     ($ty:ty) => {{
-                        let a = b.try_into().unwrap();
+                        let mut a = [0u8; std::mem::size_of::<$ty>()];
+                        a.copy_from_slice(b);
                         (if le { <$ty>::from_le_bytes(a) } else { <$ty>::from_be_bytes(a) }) as f64
                     }};
                 }
@@ -269,12 +333,27 @@ impl Reader<'_> {
         }
     }
 
-    fn skip_list(&mut self, c: Scalar, t: Scalar) -> Result<(), String> {
+    /// Reads a list's length and checks that its entries fit in the bytes left.
+    fn list_len(&mut self, c: Scalar, t: Scalar) -> Result<u64, String> {
         let n = self.scalar(c)?;
-        if !(0.0..=1e7).contains(&n) {
-            return Err(format!("invalid list length {n}"));
+        if !(n >= 0.0 && n.fract() == 0.0 && n < u32::MAX as f64) {
+            return Err(self.place(format!("invalid list length {n}")));
         }
-        for _ in 0..n as usize {
+        let n = n as u64;
+        let per = match self.format {
+            Format::Ascii => 2,
+            _ => t.size() as u64,
+        };
+        let left = (self.data.len() - self.pos) as u64 + 1;
+        if n.saturating_mul(per) > left {
+            return Err(self.place(format!("a list of {n} entries does not fit in the {} bytes left (truncated or corrupt)", left - 1)));
+        }
+        Ok(n)
+    }
+
+    fn skip_list(&mut self, c: Scalar, t: Scalar) -> Result<(), String> {
+        let n = self.list_len(c, t)?;
+        for _ in 0..n {
             self.scalar(t)?;
         }
         Ok(())
@@ -315,7 +394,34 @@ impl Reader<'_> {
             self.pos += 1;
         }
         self.line += 1;
-        let _ = self.name;
         Ok(())
+    }
+
+    /// After the last element: nothing may follow but (ASCII) blank space. More data means
+    /// the header's counts are wrong, and silently dropping it would lose geometry.
+    fn end_of_data(&self, elements: &[Element]) -> Result<(), (Location, String)> {
+        let rest = &self.data[self.pos..];
+        let declared = || {
+            let counts: Vec<String> = elements.iter().map(|e| format!("{} `{}`", e.count, e.name)).collect();
+            if counts.is_empty() {
+                "no elements".to_string()
+            } else {
+                counts.join(", ")
+            }
+        };
+        match self.format {
+            Format::Ascii => match rest.iter().position(|b| !b.is_ascii_whitespace()) {
+                None => Ok(()),
+                Some(k) => {
+                    let line = self.line + rest[..k].iter().filter(|&&b| b == b'\n').count();
+                    Err((Location::Line(line), format!("data after the last record the header declares ({})", declared())))
+                }
+            },
+            _ if rest.is_empty() => Ok(()),
+            _ => Err((
+                Location::Byte((self.base + self.pos) as u64),
+                format!("{} bytes after the last record the header declares ({})", rest.len(), declared()),
+            )),
+        }
     }
 }

@@ -44,6 +44,12 @@ fn row_chunks<'a>(buf: &'a mut [Vec3], rank: &[u32], words: usize, h: usize) -> 
 }
 
 impl SimpleColours {
+    /// Bytes at most, for a `width` × `height` image: the ranks, and two colours per simple
+    /// pixel if every pixel were simple (they grow to the frame with the most).
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        4 * height * width.div_ceil(64) + 2 * std::mem::size_of::<Vec3>() * width * height
+    }
+
     /// Bytes of the ranks: 4 per 64 pixels.
     pub fn rank_bytes(&self) -> usize {
         self.rank.capacity() * 4

@@ -45,6 +45,12 @@ pub struct ConservativeDepth {
 }
 
 impl ConservativeDepth {
+    /// Bytes of a `width` × `height` buffer with its blocks, as [`Self::compute`] sizes them.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        let (cols, rows) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
+        width * height * 4 + cols * rows * (4 + 1) + cols * (4 + 1)
+    }
+
     pub fn new(width: usize, height: usize) -> Self {
         ConservativeDepth { width, height, depth: vec![f32::INFINITY; width * height], blocks: Blocks::default() }
     }

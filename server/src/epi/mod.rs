@@ -80,6 +80,11 @@ impl Flags {
     pub const COMPLEX: usize = 3;
     pub const PLANES: usize = 4;
 
+    /// Bytes of the flag planes of a `width` × `height` image.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        8 * height * Self::PLANES * width.div_ceil(64)
+    }
+
     pub fn new(width: usize, height: usize) -> Self {
         let words = width.div_ceil(64);
         Flags { width, height, words, planes: vec![0; height * Self::PLANES * words] }
@@ -148,6 +153,26 @@ pub struct Epi {
 }
 
 impl Epi {
+    /// Bytes an EPI of this size allocates at its largest: its image-sized structures with
+    /// the complex filter's centre lines, and the content-sized ones at the most an image
+    /// of this size can make them hold (every pixel simple, every pixel spread to). The
+    /// projected edges grow with the scene, not the image, and are not counted. Each part
+    /// is its structure's own `bytes_for`, next to its constructor.
+    pub fn bytes_for(width: u32, height: u32) -> usize {
+        let (w, h) = (width as usize, height as usize);
+        let words = w.div_ceil(64);
+        depth::ConservativeDepth::bytes_for(w, h)
+            + raster::Boundaries::bytes_for(w, h)
+            + raster::Rasterizer::bytes_for(h)
+            + std::mem::size_of::<EpiPixel>() * w * h
+            + Flags::bytes_for(w, h)
+            + 2 * 8 * h * words
+            + reach::Neighbours::bytes_for(w, h)
+            + reach::Reach::bytes_for(w, h)
+            + antialias::SimpleColours::bytes_for(w, h)
+            + spread::Spread::bytes_for(w, h)
+    }
+
     pub fn new(width: u32, height: u32) -> Self {
         let (w, h) = (width as usize, height as usize);
         let flags = Flags::new(w, h);

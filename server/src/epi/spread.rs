@@ -30,6 +30,12 @@ pub struct Spread {
 }
 
 impl Spread {
+    /// Bytes at most, for a `width` × `height` image: both layer queues holding every pixel,
+    /// and the queued bit rows.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        2 * 4 * width * height + 8 * height * width.div_ceil(64)
+    }
+
     /// Bytes held (proportional to the pixels spread to in the worst frame).
     pub fn bytes(&self) -> usize {
         4 * (self.frontier.capacity() + self.next.capacity()) + 8 * self.queued.capacity()
@@ -154,6 +160,12 @@ pub struct BaselineHoles {
 }
 
 impl BaselineHoles {
+    /// Bytes at most, for a `width` × `height` image (used once a session switches to the
+    /// Render Cache baseline): the spreading queues and two bit planes.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        Spread::bytes_for(width, height) + 2 * 8 * height * width.div_ceil(64)
+    }
+
     /// Fills the pixels of the baseline's frame that no sample reached (no point, weight 0):
     /// within the frame's objects when their per-pixel ids are given (as edge-and-point
     /// reconstruction does), colours spread from neighbouring pixels ignoring edges, then

@@ -30,6 +30,22 @@ pub struct HoleFill {
 }
 
 impl HoleFill {
+    /// Bytes of the pyramid [`Self::new`] allocates for a `width` × `height` image.
+    pub fn bytes_for(width: u32, height: u32) -> usize {
+        let (w, h) = (width as usize, height as usize);
+        let (mut size, mut cells, mut levels) = (FINEST, 0usize, 0usize);
+        loop {
+            let (lw, lh) = (w.div_ceil(size).max(1), h.div_ceil(size).max(1));
+            cells += lw * lh;
+            levels += 1;
+            if lw == 1 && lh == 1 {
+                break;
+            }
+            size *= 2;
+        }
+        cells * std::mem::size_of::<[f32; 4]>() + levels.next_power_of_two().max(4) * std::mem::size_of::<Level>()
+    }
+
     pub fn new(width: u32, height: u32) -> Self {
         let (w, h) = (width as usize, height as usize);
         let mut levels = Vec::new();
@@ -182,11 +198,25 @@ impl ObjectFill {
         8 * (self.todo.capacity() + self.queued.capacity()) + 4 * (self.round.capacity() + self.next.capacity()) + 12 * self.colours.capacity()
     }
 
+    /// Bytes held at most for a `width` × `height` image: [`Self::fill`] sizes its queues
+    /// for every pixel on first use, so they never grow by doubling past this.
+    pub fn bytes_for(width: u32, height: u32) -> usize {
+        let pixels = width as usize * height as usize;
+        16 * height as usize * (width as usize).div_ceil(64) + (4 + 4 + 12) * pixels
+    }
+
     /// Fills the hole pixels (bits in `holes`, `ceil(width / 64)` words per row) reachable
     /// from coloured pixels of the same object (`objects`, per pixel; any id, the background
     /// too). Returns the pixels filled and the hole bits left.
     pub fn fill(&mut self, width: usize, height: usize, holes: &[u64], objects: &[u32], image: &mut [Vec3]) -> (u32, &[u64]) {
         let words = width.div_ceil(64);
+        let pixels = width * height;
+        for q in [&mut self.round, &mut self.next] {
+            q.clear();
+            q.reserve_exact(pixels);
+        }
+        self.colours.clear();
+        self.colours.reserve_exact(pixels);
         self.todo.clear();
         self.todo.extend_from_slice(holes);
         self.queued.clear();

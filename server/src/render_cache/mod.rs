@@ -167,6 +167,10 @@ pub struct PointImage {
 }
 
 impl PointImage {
+    /// Bytes per pixel of its arrays.
+    pub const BYTES_PER_PIXEL: usize =
+        4 + 4 + std::mem::size_of::<[f32; 2]>() + std::mem::size_of::<Vec3>() + 4;
+
     fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
         Self {
@@ -299,12 +303,37 @@ pub struct RenderCache {
     image: Vec<Vec3>,
 }
 
+/// Pool capacity of a cache of `pixels` pixels ([`CacheConfig::points_per_pixel`] clamped).
+fn capacity_for(pixels: usize, points_per_pixel: f32) -> usize {
+    let ppp = if points_per_pixel.is_finite() { points_per_pixel.clamp(0.0, 64.0) } else { 2.0 };
+    // Indices must stay below NO_POINT.
+    ((pixels as f64 * ppp as f64) as usize).min(NO_POINT as usize - 1)
+}
+
 impl RenderCache {
+    /// Bytes a cache of this configuration allocates at its largest: what [`Self::new`]
+    /// allocates (the pool, the replacement queues' reserve, the per-pixel buffers) plus the
+    /// depth buffers that reprojection adds, one per share of the points on a pool of
+    /// `threads` threads. The session's memory accounting adds this up: a buffer added to
+    /// the cache is added here (a test compares it with what `new` and a frame allocate).
+    pub fn bytes_for(width: u32, height: u32, points_per_pixel: f32, threads: usize) -> usize {
+        use std::mem::size_of;
+        let pixels = width as usize * height as usize;
+        let capacity = capacity_for(pixels, points_per_pixel);
+        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8;
+        // Projections, the free lists and the oldest-first queues (reserved at 2 entries per
+        // slot plus 64 per region).
+        let per_point = pool + size_of::<Projected>() + 4 + 2 * size_of::<(u64, u32)>();
+        let bands = height.div_ceil(BAND_ROWS).max(1) as usize;
+        let per_region = size_of::<Region>() + 64 * size_of::<(u64, u32)>();
+        let shares = threads.clamp(1, 16).min(capacity.max(1));
+        let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>();
+        capacity * per_point + bands * per_region + size_of::<Vec<u64>>() * shares + pixels * per_pixel
+    }
+
     pub fn new(cfg: CacheConfig) -> Self {
         let pixels = cfg.width as usize * cfg.height as usize;
-        let ppp = if cfg.points_per_pixel.is_finite() { cfg.points_per_pixel.clamp(0.0, 64.0) } else { 2.0 };
-        // Indices must stay below NO_POINT.
-        let capacity = ((pixels as f64 * ppp as f64) as usize).min(NO_POINT as usize - 1);
+        let capacity = capacity_for(pixels, cfg.points_per_pixel);
         let pool = Pool {
             px: vec![0.0; capacity],
             py: vec![0.0; capacity],

@@ -18,6 +18,7 @@ use crate::rng::mix64;
 use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
+use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
@@ -138,6 +139,8 @@ pub(super) struct FrameLoop {
     shown: bool,
     /// The last waiting state reported to the viewer (live workers, workers, requested).
     waiting_reported: Option<(usize, usize, bool)>,
+    points_per_pixel: f32,
+    memory: Option<MemoryGrant>,
 }
 
 impl FrameLoop {
@@ -202,6 +205,8 @@ impl FrameLoop {
             counters: SessionCounters::default(),
             shown: false,
             waiting_reported: None,
+            points_per_pixel: p.points_per_pixel,
+            memory: p.memory,
             scene: p.scene,
         }
     }
@@ -453,11 +458,14 @@ impl FrameLoop {
                     Err(e) => self.out.reject(Code::InvalidArgument, format!("object move ignored: {e}")),
                 },
                 Input::Settings(s) => match self.settings.with(s) {
-                    Ok(new) => {
-                        self.settings = new;
-                        let pixels = self.width as usize * self.height as usize;
-                        self.ring.reserve(ring_capacity(&new, pixels));
-                    }
+                    Ok(new) => match self.regrant(&new) {
+                        Ok(()) => {
+                            self.settings = new;
+                            let pixels = self.width as usize * self.height as usize;
+                            self.ring.reserve(ring_capacity(&new, pixels));
+                        }
+                        Err(e) => self.out.reject(Code::ResourceExhausted, format!("settings ignored: {e}")),
+                    },
                     Err(e) => self.out.reject(Code::InvalidArgument, format!("settings ignored: {e}")),
                 },
                 Input::Pick(p) => match super::pick::answer(&self.scene, &self.transforms, &self.camera, &self.cam_frame, p) {
@@ -469,6 +477,14 @@ impl FrameLoop {
         // Hand the (now empty) buffer back so its capacity is reused.
         self.pending = pending;
         self.pending.clear();
+    }
+
+    /// Resizes the session's memory grant for `settings` (sampling more pixels per frame
+    /// needs a larger request ring); an error leaves the grant as it was.
+    fn regrant(&mut self, settings: &SessionSettings) -> Result<(), String> {
+        let Some(grant) = &mut self.memory else { return Ok(()) };
+        let need = SessionMemory::estimate(self.width, self.height, self.points_per_pixel, settings, rayon::current_num_threads());
+        grant.resize(need.total(), "the session with these settings")
     }
 
     fn move_object(&mut self, id: u32, t: glam::Affine3A) {
@@ -643,11 +659,6 @@ fn light_bound(l: &edgepoint_scene::Light) -> LightBound {
     LightBound { center, radius }
 }
 
-
-/// Ring size: all requests that can be outstanding, twice over, so late answers still match.
-fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
-    2 * (s.frame_budget(pixels) * OUTSTANDING_FRAMES + s.batch_size as usize)
-}
 
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3

@@ -14,6 +14,7 @@
 mod edge_source;
 mod feedback;
 mod frame_loop;
+pub mod memory;
 mod output;
 mod progress;
 pub mod pick;
@@ -69,6 +70,9 @@ pub struct SessionParams {
     /// The scene's edge index, shared with the other sessions on the same scene (built by
     /// the first session that needs it).
     pub edge_index: EdgeIndexSlot,
+    /// The session's share of the server's memory budget (`None`: unlimited); a settings
+    /// change that needs more than it can grow to is refused.
+    pub memory: Option<memory::MemoryGrant>,
 }
 
 /// Default Render Cache size per pixel (DESIGN.md: "a small multiple of the pixel count").

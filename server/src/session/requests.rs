@@ -37,6 +37,11 @@ pub struct RequestRing {
 }
 
 impl RequestRing {
+    /// Bytes of a ring remembering at least `min_capacity` requests.
+    pub fn bytes_for(min_capacity: usize) -> usize {
+        min_capacity.max(64).next_power_of_two() * std::mem::size_of::<Slot>()
+    }
+
     /// A ring remembering at least `min_capacity` requests.
     pub fn new(min_capacity: usize) -> Self {
         let cap = min_capacity.max(64).next_power_of_two();

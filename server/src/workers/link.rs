@@ -304,7 +304,7 @@ async fn stream_once(
     tuning: &mut Tuning,
 ) -> String {
     let cfg = &shared.cfg;
-    let mut client = ShaderWorkerClient::new(member.channel.clone())
+    let mut client = ShaderWorkerClient::with_interceptor(member.channel.clone(), cfg.worker_token.clone())
         .max_decoding_message_size(cfg.max_message_bytes)
         .max_encoding_message_size(cfg.max_message_bytes);
     let t0 = Instant::now();

@@ -87,8 +87,12 @@ pub struct PoolOptions {
     pub target_batch_time: Duration,
     pub min_batch: usize,
     pub max_batch: usize,
-    /// TLS for `https://` workers (CA and name checks); `None` trusts the web PKI roots.
+    /// TLS for `https://` workers (CA and name checks, and a client certificate for mutual
+    /// TLS); `None` trusts the web PKI roots.
     pub tls: Option<ClientTlsConfig>,
+    /// Adds the bearer token workers started with `--token-file` require to every call
+    /// (`--worker-token-file`; the default adds none).
+    pub worker_token: edgepoint_proto::auth::SendToken,
     /// Where the pool's metrics go (unexported unless registered with a server's registry).
     pub metrics: Arc<PoolMetrics>,
 }
@@ -113,6 +117,7 @@ impl Default for PoolOptions {
             min_batch: 16,
             max_batch: 65_536,
             tls: None,
+            worker_token: Default::default(),
             metrics: Arc::new(PoolMetrics::default()),
         }
     }
@@ -392,7 +397,7 @@ impl WorkerPool {
     pub async fn shaders(&self, timeout: Duration) -> Option<Vec<String>> {
         let mut set = tokio::task::JoinSet::new();
         for w in self.members().iter() {
-            let mut client = ShaderWorkerClient::new(w.channel.clone());
+            let mut client = ShaderWorkerClient::with_interceptor(w.channel.clone(), self.core.opts.worker_token.clone());
             let mut req = tonic::Request::new(InfoRequest {});
             req.set_timeout(timeout);
             set.spawn_on(async move { tokio::time::timeout(timeout, client.info(req)).await }, &self.core.runtime);

@@ -38,6 +38,12 @@ pub struct Boundaries {
 }
 
 impl Boundaries {
+    /// Bytes of the masks of a `width` × `height` image, with the centre lines the complex
+    /// filter adds ([`crate::epi::Epi::build`] allocates them on its first frame with it).
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        2 * (width + 1) * (height + 1) + 2 * width * height
+    }
+
     pub fn new(width: usize, height: usize) -> Self {
         Boundaries { width, height, sides: vec![0; (width + 1) * (height + 1)], centres: Vec::new() }
     }
@@ -192,6 +198,12 @@ pub struct Rasterizer {
 impl Rasterizer {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Bytes of the per-band bin lists of a `height`-row image (their contents, and the
+    /// projected segments, grow with the edges on screen, not with the image).
+    pub fn bytes_for(height: usize) -> usize {
+        (height + 1).div_ceil(BAND_ROWS) * std::mem::size_of::<Vec<u32>>()
     }
 
     /// Clears `out` and records the crossings of `edges` seen with `cam`, culled against

@@ -112,6 +112,11 @@ impl M4 {
 }
 
 impl Neighbours {
+    /// Bytes of the neighbour masks of a `width` × `height` image.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        8 * height * NB_PLANES * width.div_ceil(64)
+    }
+
     pub fn new(width: usize, height: usize) -> Self {
         let words = width.div_ceil(64);
         Neighbours { width, height, words, planes: vec![0; height * NB_PLANES * words] }
@@ -204,6 +209,11 @@ pub struct Reach {
 }
 
 impl Reach {
+    /// Bytes of the reachability masks of a `width` × `height` image.
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        8 * height * REACH_PLANES * width.div_ceil(64)
+    }
+
     pub fn new(width: usize, height: usize) -> Self {
         let words = width.div_ceil(64);
         Reach { width, height, words, planes: vec![0; height * REACH_PLANES * words] }
