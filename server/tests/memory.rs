@@ -3,6 +3,8 @@
 //! constructor (and first frames) allocate, and the whole estimate to what a running
 //! session allocates — so a buffer added to a structure without its `bytes_for`, or to the
 //! session beside them, fails here. (Own test binary: the counters are global.)
+mod common;
+
 use edgepoint_scene::alloc_count::{measure, CountingAlloc};
 use edgepoint_scene::Camera;
 use edgepoint_server::epi::spread::BaselineHoles;
@@ -160,9 +162,13 @@ fn a_running_session_stays_within_its_estimate() {
     let (w, h) = (480u32, 360u32);
     let settings = SessionSettings { max_fps: 1000.0, ..Default::default() };
     let estimate = SessionMemory::estimate(w, h, 2.0, &settings, rayon::current_num_threads()).total();
+    // A real worker (in this process, started before the measurement): sessions publish
+    // frames only once samples arrive. Its own allocations during the run (a cornell BVH,
+    // request and answer buffers) are small beside the session's and are counted too.
+    let worker = common::Worker::spawn();
     let (frames, u) = measure(|| {
         rt.block_on(async {
-            let pool = WorkerPool::new(vec![]).unwrap();
+            let pool = WorkerPool::new(vec![worker.url.clone()]).unwrap();
             let source = pb::builtin_source("cornell");
             let hash = pb::scene_hash(&source);
             let params = SessionParams {

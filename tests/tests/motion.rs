@@ -6,8 +6,13 @@
 use serde_json::Value;
 use std::process::Command;
 
+/// One cluster at a time: the two cores shade for one session, so a frame's samples do not
+/// depend on which other test happens to run beside it.
+static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Runs `edgepoint-bench motion` with `args` (plus test-sized defaults) and returns its JSON.
 fn motion(args: &[&str]) -> Value {
+    let _one = ONE.lock().unwrap_or_else(|p| p.into_inner());
     let bench = edgepoint_viewer::local::find_binary("edgepoint-bench").expect("edgepoint-bench is built with the workspace's tests");
     let refs = std::env::temp_dir().join(format!("edgepoint-motion-refs-{}", std::process::id()));
     let out = Command::new(bench)

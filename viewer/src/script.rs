@@ -24,12 +24,14 @@ pub struct ObjectSlide {
 
 /// Frames per back-and-forth cycle.
 pub const SLIDE_PERIOD_FRAMES: f32 = 120.0;
-/// Slide amplitude as a fraction of the scene's X extent.
+/// Slide amplitude as a fraction of the scene's X extent, at most the object's own width
+/// (so a small object on a large floor stays where the camera looks).
 pub const SLIDE_AMPLITUDE_FRACTION: f32 = 0.25;
 
 impl ObjectSlide {
     /// The slide of the object called `name` in `started`, with amplitude 25% of the
-    /// scene's X extent and a 120-frame period. An unknown name is an error listing the
+    /// scene's X extent or the object's own X extent, whichever is less, and a 120-frame
+    /// period. An unknown name is an error listing the
     /// scene's object names.
     pub fn new(started: &pb::Started, name: &str) -> Result<Self> {
         let obj = started.objects.iter().find(|o| o.name == name).ok_or_else(|| {
@@ -46,11 +48,19 @@ impl ObjectSlide {
         if !extent.is_finite() || extent <= 0.0 {
             bail!("--move-object: the scene's X extent is {extent} (bounds {min} .. {max}); cannot size the slide");
         }
+        let own = match (&obj.bounds_min, &obj.bounds_max) {
+            (Some(lo), Some(hi)) => {
+                let (lo, hi) = edgepoint_scene::geometry::transformed_box(&base, (glam::Vec3::from(lo), glam::Vec3::from(hi)));
+                hi.x - lo.x
+            }
+            _ => f32::INFINITY,
+        };
+        let amplitude = if own.is_finite() && own > 0.0 { own.min(SLIDE_AMPLITUDE_FRACTION * extent) } else { SLIDE_AMPLITUDE_FRACTION * extent };
         Ok(ObjectSlide {
             object_id: obj.id,
             name: name.to_string(),
             base,
-            amplitude: SLIDE_AMPLITUDE_FRACTION * extent,
+            amplitude,
             period_frames: SLIDE_PERIOD_FRAMES,
             frame: 0,
         })

@@ -17,6 +17,7 @@
 //!
 //! No networking here; all per-frame buffers are allocated once in [`RenderCache::new`].
 
+pub mod fresh;
 pub mod holes;
 mod interpolate;
 mod reproject;
@@ -207,6 +208,9 @@ pub(crate) const EMPTY_KEY: u64 = u64::MAX;
 
 const FLAG_VALID: u8 = 1;
 const FLAG_HIT: u8 = 2;
+/// Shaded before a change that may have altered its shading (it shows [`STALE_AGE`]); its
+/// shading frame is kept, so that newer points of the same surface can be preferred.
+const FLAG_STALE: u8 = 4;
 
 /// What pass 2 of reprojection reads of a winning point, packed so that one random access
 /// fetches it.
@@ -407,7 +411,7 @@ impl RenderCache {
         let band = (s.pixel[1] / BAND_ROWS).min(self.regions.len() as u32 - 1) as usize;
         let Some(slot) = self.take_slot(band) else { return false };
         let i = slot as usize;
-        let born = if stale { self.stale_born() } else { self.frame };
+        let born = self.frame;
         let p = &mut self.pool;
         if p.flags[i] & FLAG_VALID == 0 {
             self.valid += 1;
@@ -420,7 +424,7 @@ impl RenderCache {
         p.object[i] = s.object;
         p.epoch[i] = s.epoch;
         p.pixel[i] = s.pixel;
-        p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 };
+        p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 } | if stale { FLAG_STALE } else { 0 };
         p.stamp[i] = self.next_stamp;
         // Not part of the last frame: never taken for a hidden point.
         self.proj[i] = Projected::NONE;
@@ -524,23 +528,21 @@ impl RenderCache {
         if lights.is_empty() || !(region.0.cmple(region.1).all()) {
             return 0;
         }
-        let stale_born = self.stale_born();
         let p = &mut self.pool;
         let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| (l.center, region.0 - Vec3::splat(l.radius), region.1 + Vec3::splat(l.radius))).collect();
         const CHUNK: usize = 4096;
-        p.shade
+        p.flags
             .par_chunks_mut(CHUNK)
-            .zip(p.flags.par_chunks(CHUNK))
             .zip(p.px.par_chunks(CHUNK).zip(p.py.par_chunks(CHUNK)).zip(p.pz.par_chunks(CHUNK)))
-            .map(|((shade, flags), ((xs, ys), zs))| {
+            .map(|(flags, ((xs, ys), zs))| {
                 let mut n = 0u32;
-                for k in 0..shade.len() {
+                for k in 0..flags.len() {
                     if flags[k] & (FLAG_VALID | FLAG_HIT) != FLAG_VALID | FLAG_HIT {
                         continue;
                     }
                     let q = Vec3::new(xs[k], ys[k], zs[k]);
                     if boxes.iter().any(|&(c, lo, hi)| segment_hits_box(q, c, lo, hi)) {
-                        shade[k].born = stale_born;
+                        flags[k] |= FLAG_STALE;
                         n += 1;
                     }
                 }
@@ -553,15 +555,11 @@ impl RenderCache {
     /// light or a shadowing object moved), so prioritized sampling re-shades it first and
     /// replacement takes it before fresh points, but it stays visible until replaced.
     pub fn mark_stale(&mut self) {
-        let stale_born = self.stale_born();
-        for sh in self.pool.shade.iter_mut() {
-            sh.born = stale_born;
+        for f in self.pool.flags.iter_mut() {
+            if *f & FLAG_VALID != 0 {
+                *f |= FLAG_STALE;
+            }
         }
-    }
-
-    /// The birth frame that gives a point [`STALE_AGE`] now.
-    fn stale_born(&self) -> u32 {
-        self.frame.wrapping_sub(STALE_AGE as u32)
     }
 
     /// Age in frames of a point shaded at frame `born`.
@@ -615,7 +613,7 @@ impl RenderCache {
             object: p.object[i],
             epoch: p.epoch[i],
             pixel: p.pixel[i],
-            age: Self::age_of(self.frame, p.shade[i].born),
+            age: if p.flags[i] & FLAG_STALE != 0 { STALE_AGE } else { Self::age_of(self.frame, p.shade[i].born) },
         })
     }
 
@@ -672,7 +670,6 @@ impl RenderCache {
             * glam::DAffine3::from_cols_array(&from.to_cols_array().map(f64::from)).inverse();
         let d = glam::Affine3A::from_cols_array(&d.to_cols_array().map(|v| v as f32));
         let normal_matrix = glam::Mat3::from(d.matrix3).inverse().transpose();
-        let stale_born = self.stale_born();
         let p = &mut self.pool;
         let mut moved = 0;
         for i in 0..self.capacity {
@@ -681,7 +678,7 @@ impl RenderCache {
                 (p.px[i], p.py[i], p.pz[i]) = (w.x, w.y, w.z);
                 let n = (normal_matrix * Vec3::new(unorm(p.nx[i]), unorm(p.ny[i]), unorm(p.nz[i]))).normalize_or_zero();
                 (p.nx[i], p.ny[i], p.nz[i]) = (snorm16(n.x), snorm16(n.y), snorm16(n.z));
-                p.shade[i].born = stale_born;
+                p.flags[i] |= FLAG_STALE;
                 moved += 1;
             }
         }

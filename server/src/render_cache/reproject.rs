@@ -5,7 +5,7 @@
 //! rows merges them. A depth-buffer entry is `(depth bits << 32) | point index`, the
 //! minimum wins: positive `f32` bit patterns order like the floats, a point at infinity (a
 //! miss) is behind every hit, and equal depths go to the lower index.
-use super::{GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_VALID, GEOMETRY_CULL_RELATIVE, NO_POINT};
+use super::{GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_STALE, FLAG_VALID, GEOMETRY_CULL_RELATIVE, STALE_AGE, NO_POINT};
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -150,6 +150,7 @@ impl RenderCache {
             zmin_row: &self.zmin_row,
             proj: &self.proj,
             shade: &pool.shade,
+            flags: &pool.flags,
             frame: self.frame,
             w,
             h,
@@ -258,6 +259,7 @@ struct RowContext<'a> {
     zmin_row: &'a [u32],
     proj: &'a [Projected],
     shade: &'a [Shade],
+    flags: &'a [u8],
     frame: u32,
     w: usize,
     h: usize,
@@ -317,7 +319,7 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
         sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
         let sh = c.shade[i];
         col[x] = sh.color;
-        ag[x] = RenderCache::age_of(c.frame, sh.born);
+        ag[x] = if c.flags[i] & FLAG_STALE != 0 { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
     }
     culled
 }

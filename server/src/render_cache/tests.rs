@@ -800,3 +800,77 @@ fn points_whose_surface_turned_away_from_the_eye_are_not_shown() {
     let p = (0..c.capacity() as u32).find_map(|i| c.point(i)).unwrap();
     assert!((p.normal - Vec3::NEG_Z).length() < 1e-3, "{}", p.normal);
 }
+
+#[test]
+fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() {
+    // Random point images against the definition, pixel by pixel: a stale hit point is left
+    // out exactly when a point of its object (or, without objects, of a depth within 5 %)
+    // within FRESH_RADIUS pixels in both axes is fresh or shaded in a later frame, and
+    // disagrees with it in colour.
+    use super::fresh::{disagree, FRESH_RADIUS};
+    let mut rng = Rng::new(41);
+    let palette = [Vec3::splat(0.05), Vec3::splat(0.06), Vec3::splat(0.5), Vec3::new(0.5, 0.1, 0.1)];
+    for case in 0..80 {
+        let (w, h) = (1 + rng.below(23) as u32, 1 + rng.below(19) as u32);
+        let mut c = cache(w, h, 1.0);
+        let n = (w * h) as usize;
+        assert!(c.capacity() >= n);
+        let objects: Vec<u32> = (0..n).map(|_| rng.below(3) as u32).collect();
+        c.frame = 10;
+        for i in 0..n {
+            let kind = rng.below(4);
+            let stale = kind <= 2;
+            let born = 5 + rng.below(4) as u32;
+            c.pool.flags[i] = FLAG_VALID | FLAG_HIT | if stale { FLAG_STALE } else { 0 };
+            c.pool.shade[i] = Shade { color: palette[rng.below(4)], born };
+            let p = &mut c.points;
+            p.point[i] = if kind == 0 { NO_POINT } else { i as u32 };
+            p.depth[i] = match kind {
+                0 => f32::INFINITY,
+                1 if rng.below(4) == 0 => f32::INFINITY, // a miss
+                _ => 1.0 + rng.below(3) as f32 * 0.5 + rng.unit() * 0.01,
+            };
+            p.age[i] = match kind {
+                0 => f32::INFINITY,
+                1 | 2 => STALE_AGE,
+                _ => RenderCache::age_of(c.frame, born),
+            };
+            p.color[i] = if kind == 0 { Vec3::ZERO } else { c.pool.shade[i].color };
+        }
+        let before = c.points.clone();
+        let with_objects = case % 2 == 0;
+        let hidden = c.hide_stale_near_fresh(with_objects.then_some(&objects[..]));
+        let r = FRESH_RADIUS as i64;
+        let mut expect = 0;
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                let i = (y * w as i64 + x) as usize;
+                let stale = before.point[i] != NO_POINT && before.age[i] == STALE_AGE && before.depth[i].is_finite();
+                let newer_near = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (x + dx, y + dy))).any(|(xx, yy)| {
+                    if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                        return false;
+                    }
+                    let j = (yy * w as i64 + xx) as usize;
+                    if j == i || before.point[j] == NO_POINT || !before.depth[j].is_finite() {
+                        return false;
+                    }
+                    let same = if with_objects { objects[j] == objects[i] } else { (before.depth[j] - before.depth[i]).abs() <= 0.05 * before.depth[i] };
+                    let trusted = before.age[j] < STALE_AGE || c.pool.shade[j].born > c.pool.shade[i].born;
+                    same && trusted && disagree(before.color[i], before.color[j])
+                });
+                let gone = stale && newer_near;
+                expect += gone as u32;
+                assert_eq!(c.points.point[i] == NO_POINT, gone || before.point[i] == NO_POINT, "case {case} pixel {x},{y}");
+                if !gone {
+                    assert_eq!(c.points.age[i].to_bits(), before.age[i].to_bits());
+                    assert_eq!(c.points.color[i], before.color[i]);
+                }
+            }
+        }
+        assert_eq!(hidden, expect);
+    }
+    // The colour test itself: display-like differences.
+    assert!(disagree(Vec3::splat(0.05), Vec3::splat(0.5)));
+    assert!(!disagree(Vec3::splat(0.05), Vec3::splat(0.06)));
+    assert!(!disagree(Vec3::splat(0.5), Vec3::splat(0.55)));
+}

@@ -138,7 +138,7 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 impl Sampler {
     /// Bytes [`Self::new`] allocates for a `width` × `height` image.
     pub fn bytes_for(width: u32, height: u32) -> usize {
-        4 * width as usize * height as usize + 2 * 4 * (width as usize + 2)
+        4 * width as usize * height as usize + 8 * height as usize + 2 * 4 * (width as usize + 2) + 2 * 4 * width as usize
     }
 
     pub fn new(width: u32, height: u32, seed: u64) -> Self {

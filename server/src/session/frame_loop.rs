@@ -25,7 +25,7 @@ use crate::encode::{effective_encoding, FrameEncoder};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
-use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
+use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample, STAGE_REPROJECT};
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
 use crate::visibility::{Visibility, STAGE_VISIBILITY};
@@ -315,6 +315,10 @@ impl FrameLoop {
         self.visibility.update(&self.scene, &self.transforms, &self.cam_frame);
         self.times.add(STAGE_VISIBILITY, ms_since(t));
         let occluded = self.cache.reproject_points(&self.cam_frame, Some(self.visibility.cull()), &mut self.times);
+        // Points shaded before a move that may have changed them give way to fresh ones.
+        let t = Instant::now();
+        self.cache.hide_stale_near_fresh(Some(self.visibility.objects()));
+        self.times.add(STAGE_REPROJECT, ms_since(t));
         let epi_counts = build.then(|| {
             let centre_lines = epr && s.complex_filter;
             self.epi.build(&self.edges, &self.cam_frame, self.cache.point_image(), centre_lines, &mut self.times)
