@@ -167,6 +167,27 @@ async fn references(
 
 use crate::inprocess::write_png;
 
+/// The `start` message of a bench session: `source` at `width` × `height` with the shader,
+/// its parameters, the viewer's --camera (over the scene's) and `settings`.
+pub fn start_message(
+    source: &pb::SceneSource,
+    (width, height): (u32, u32),
+    (shader, params): (&str, &[(String, f64)]),
+    camera: Option<&edgepoint_viewer::CameraSpec>,
+    settings: pb::Settings,
+) -> pb::Start {
+    pb::Start {
+        scene: Some(source.clone()),
+        width,
+        height,
+        shader: shader.to_string(),
+        shader_params: params.iter().cloned().collect(),
+        encoding: pb::FrameEncoding::Qoi as i32,
+        settings: Some(settings),
+        camera: camera.map(|c| c.to_wire()),
+    }
+}
+
 pub fn run(args: FrameArgs) -> Result<()> {
     let a = &args.scene;
     if args.frames == 0 {
@@ -176,24 +197,9 @@ pub fn run(args: FrameArgs) -> Result<()> {
     let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
-        let start = pb::Start {
-            scene: Some(source.clone()),
-            width: a.width,
-            height: a.height,
-            shader: a.shader.clone(),
-            shader_params: a.shader_params.iter().cloned().collect(),
-            encoding: pb::FrameEncoding::Qoi as i32,
-            settings: Some({
-                let mut s = pb::Settings {
-                    sparseness: args.sparseness.unwrap_or(0.0),
-                    max_fps: args.max_fps.unwrap_or(0.0),
-                    ..Default::default()
-                };
-                args.reconstruction.apply(&mut s);
-                s
-            }),
-            camera: a.camera.map(|c| c.to_wire()),
-        };
+        let mut settings = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
+        args.reconstruction.apply(&mut settings);
+        let start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
         let t0 = Instant::now();
         let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
         let camera = camera_from_wire(started.camera.as_ref().context("server sent no camera")?);

@@ -198,16 +198,7 @@ async fn workers_phase(a: &LoadtestArgs, cluster: &LocalCluster, source: &pb::Sc
 }
 
 fn session_start(a: &LoadtestArgs, source: &pb::SceneSource) -> pb::Start {
-    pb::Start {
-        scene: Some(source.clone()),
-        width: a.width,
-        height: a.height,
-        shader: a.shader.clone(),
-        shader_params: a.shader_params.iter().cloned().collect(),
-        encoding: pb::FrameEncoding::Qoi as i32,
-        settings: Some(pb::Settings { max_fps: a.max_fps, ..Default::default() }),
-        camera: a.camera.map(|c| c.to_wire()),
-    }
+    crate::frame::start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), pb::Settings { max_fps: a.max_fps, ..Default::default() })
 }
 
 /// What one session saw.

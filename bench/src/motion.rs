@@ -238,17 +238,8 @@ async fn record(
         reconstruction: mode.to_wire() as i32,
         ..Default::default()
     };
-    let mut start = pb::Start {
-        scene: Some(source.clone()),
-        width: a.width,
-        height: a.height,
-        shader: a.shader.clone(),
-        shader_params: a.shader_params.iter().cloned().collect(),
-        encoding: pb::FrameEncoding::Qoi as i32,
-        settings: Some(settings),
-        // --camera over the scene's camera: the base of the still, dolly and object paths.
-        camera: a.camera.as_ref().map(|c| c.to_wire()),
-    };
+    // --camera over the scene's camera: the base of the still, dolly and object paths.
+    let mut start = crate::frame::start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
     let steps = match expected {
         Some(s) => s.to_vec(),
         None => {

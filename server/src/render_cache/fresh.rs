@@ -14,8 +14,12 @@
 //! changed); one with no newer neighbour stays too, the best guess there is until one
 //! arrives. Left out, its pixel counts as unsampled, so the sampler asks for it at the
 //! highest priority and the cache replaces the point first when it needs a slot.
-use super::{RenderCache, FLAG_STALE, NO_POINT, STALE_AGE};
+use super::{RenderCache, NO_POINT, STALE_AGE};
+use rayon::prelude::*;
 use glam::Vec3;
+
+/// Stage name of [`RenderCache::hide_stale_near_fresh`] in the frame's stage times.
+pub const STAGE_STALE: &str = "stale";
 
 /// Half the side of the window searched for a newer point (pixels): 5 × 5. After k
 /// frames of resampling at 1/64 of the pixels, a point shaded in them lies in such a window
@@ -23,13 +27,22 @@ use glam::Vec3;
 pub const FRESH_RADIUS: usize = 2;
 
 /// Two colours disagree when a channel differs by more than this after a square root (a
-/// display-like curve: about 0.15–0.2 in sRGB, below the 0.25 of an outlier pixel).
-pub const DISAGREE: f32 = 0.15;
+/// display-like curve: about 0.15–0.2 in sRGB, below the 0.25 of an outlier pixel), in
+/// steps of 1/255.
+pub const DISAGREE: u32 = 38;
 
-/// Whether two linear colours disagree (see [`DISAGREE`]).
-pub fn disagree(a: Vec3, b: Vec3) -> bool {
-    let d = (a.max(Vec3::ZERO)).powf(0.5) - (b.max(Vec3::ZERO)).powf(0.5);
-    d.abs().max_element() > DISAGREE
+/// A linear colour as compared: per channel the square root clamped to [0, 1], in 8 bits,
+/// packed as r | g << 8 | b << 16.
+#[inline]
+pub fn display_rgb(c: Vec3) -> u32 {
+    let q = |v: f32| (v.clamp(0.0, 1.0).sqrt() * 255.0 + 0.5) as u32;
+    q(c.x) | q(c.y) << 8 | q(c.z) << 16
+}
+
+/// Whether two packed colours ([`display_rgb`]) disagree (see [`DISAGREE`]).
+#[inline]
+pub fn disagree(a: u32, b: u32) -> bool {
+    (0..3).any(|k| ((a >> (8 * k)) & 255).abs_diff((b >> (8 * k)) & 255) > DISAGREE)
 }
 
 impl RenderCache {
@@ -37,52 +50,92 @@ impl RenderCache {
     /// trusted more — not stale, or shaded in a later frame — on the same object
     /// (`objects`: the exact visibility's object per pixel; without it, depths within 5 %
     /// decide) within [`FRESH_RADIUS`] pixels. Call after reprojection. Returns how many
-    /// points were left out.
+    /// points were left out. Rows are decided in parallel from the point image as
+    /// reprojected (into one bit per pixel), then applied, so the order does not matter;
+    /// everything a window reads is per pixel and contiguous.
     pub fn hide_stale_near_fresh(&mut self, objects: Option<&[u32]>) -> u32 {
-        let p = &mut self.points;
-        let (flags, shade) = (&self.pool.flags, &self.pool.shade);
+        let p = &self.points;
         let (w, h) = (p.width as usize, p.height as usize);
+        if w == 0 || h == 0 {
+            return 0;
+        }
+        if !p.age.par_iter().any(|&a| a == STALE_AGE) {
+            return 0;
+        }
+        let words = w.div_ceil(64);
         let r = FRESH_RADIUS;
-        // Decided on the image as reprojected, then applied: the outcome does not depend on
-        // the order of the pixels.
-        let mut hidden = Vec::new();
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                if p.age[i] != STALE_AGE || p.point[i] == NO_POINT || !p.depth[i].is_finite() {
-                    continue;
-                }
-                let born = shade[p.point[i] as usize].born;
-                let same = |j: usize| match objects {
-                    Some(o) => o[j] == o[i],
-                    None => (p.depth[j] - p.depth[i]).abs() <= 0.05 * p.depth[i],
-                };
-                let trusted = |j: usize| {
-                    let k = p.point[j] as usize;
-                    flags[k] & FLAG_STALE == 0 || (shade[k].born.wrapping_sub(born) as i32) > 0
-                };
-                let mut newer = false;
-                'window: for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                        let j = yy * w + xx;
-                        if j != i && p.point[j] != NO_POINT && p.depth[j].is_finite() && same(j) && trusted(j) && disagree(p.color[i], p.color[j]) {
-                            newer = true;
-                            break 'window;
+        // Colours as compared, once per pixel (the windows overlap 25-fold).
+        self.display.par_chunks_mut(w).zip(p.color.par_chunks(w)).for_each(|(d, c)| {
+            for (d, &c) in d.iter_mut().zip(c) {
+                *d = display_rgb(c);
+            }
+        });
+        let display = &self.display;
+        let hidden: u32 = self
+            .give_way
+            .par_chunks_mut(words)
+            .enumerate()
+            .map(|(y, bits)| {
+                bits.iter_mut().for_each(|b| *b = 0);
+                let mut n = 0;
+                for x in 0..w {
+                    let i = y * w + x;
+                    if p.age[i] != STALE_AGE || !p.depth[i].is_finite() {
+                        continue;
+                    }
+                    let (born, depth, color) = (p.born[i], p.depth[i], display[i]);
+                    let object = objects.map(|o| o[i]);
+                    let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+                    let mut newer = false;
+                    'window: for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                        let row = yy * w;
+                        // Colour first: in the smooth regions most stale points lie in, no
+                        // neighbour disagrees, and only this one contiguous array is read.
+                        for (dx, &d) in display[row + x0..row + x1].iter().enumerate() {
+                            if !disagree(color, d) {
+                                continue;
+                            }
+                            let j = row + x0 + dx;
+                            // Trusted more (a stale point's age is STALE_AGE; no point's is
+                            // infinite), a surface point, the same surface.
+                            let trusted = p.age[j] < STALE_AGE || (p.age[j] == STALE_AGE && (p.born[j].wrapping_sub(born) as i32) > 0);
+                            let same = match (objects, object) {
+                                (Some(o), Some(me)) => o[j] == me,
+                                _ => (p.depth[j] - depth).abs() <= 0.05 * depth,
+                            };
+                            if trusted && p.depth[j].is_finite() && same {
+                                newer = true;
+                                break 'window;
+                            }
                         }
                     }
+                    if newer {
+                        bits[x / 64] |= 1 << (x % 64);
+                        n += 1;
+                    }
                 }
-                if newer {
-                    hidden.push(i);
+                n
+            })
+            .sum();
+        if hidden == 0 {
+            return 0;
+        }
+        let p = &mut self.points;
+        for (y, bits) in self.give_way.chunks(words).enumerate() {
+            for (k, &word) in bits.iter().enumerate() {
+                let mut b = word;
+                while b != 0 {
+                    let i = y * w + k * 64 + b.trailing_zeros() as usize;
+                    b &= b - 1;
+                    p.point[i] = NO_POINT;
+                    p.depth[i] = f32::INFINITY;
+                    p.color[i] = Vec3::ZERO;
+                    p.age[i] = f32::INFINITY;
+                    p.born[i] = 0;
+                    p.subpixel[i] = [0.0; 2];
                 }
             }
         }
-        for &i in &hidden {
-            p.point[i] = NO_POINT;
-            p.depth[i] = f32::INFINITY;
-            p.color[i] = Vec3::ZERO;
-            p.age[i] = f32::INFINITY;
-            p.subpixel[i] = [0.0; 2];
-        }
-        hidden.len() as u32
+        hidden
     }
 }

@@ -353,6 +353,7 @@ mod tests {
             subpixel: vec![[0.5; 2]; n],
             color: vec![Vec3::ZERO; n],
             age: vec![f32::INFINITY; n],
+            born: vec![0; n],
         };
         for &(x, y, c) in samples {
             pi.point[y * w + x] = 0;

@@ -165,12 +165,15 @@ pub struct PointImage {
     pub color: Vec<Vec3>,
     /// Point age in frames since shading; `f32::INFINITY` where there is no point.
     pub age: Vec<f32>,
+    /// Frame counter when the point was shaded, stale or not (0 where there is no point):
+    /// which of two points is newer.
+    pub born: Vec<u32>,
 }
 
 impl PointImage {
     /// Bytes per pixel of its arrays.
     pub const BYTES_PER_PIXEL: usize =
-        4 + 4 + std::mem::size_of::<[f32; 2]>() + std::mem::size_of::<Vec3>() + 4;
+        4 + 4 + std::mem::size_of::<[f32; 2]>() + std::mem::size_of::<Vec3>() + 4 + 4;
 
     fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
@@ -182,6 +185,7 @@ impl PointImage {
             subpixel: vec![[0.0; 2]; n],
             color: vec![Vec3::ZERO; n],
             age: vec![f32::INFINITY; n],
+            born: vec![0; n],
         }
     }
 }
@@ -300,6 +304,10 @@ pub struct RenderCache {
     /// Per pixel: nearest depth (as `f32` bits, all ones for none) over the pixel and its
     /// left and right neighbours — the culling pre-test.
     zmin_row: Vec<u32>,
+    /// Per pixel, one bit: the stale point there gives way to a newer one (`fresh.rs`).
+    give_way: Vec<u64>,
+    /// Per pixel: its point's colour as [`fresh::display_rgb`] packs it (`fresh.rs`).
+    display: Vec<u32>,
     /// Per point: where it projected in the last frame.
     proj: Vec<Projected>,
     points: PointImage,
@@ -332,7 +340,8 @@ impl RenderCache {
         let per_region = size_of::<Region>() + 64 * size_of::<(u64, u32)>();
         let shares = threads.clamp(1, 16).min(capacity.max(1));
         let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>();
-        capacity * per_point + bands * per_region + size_of::<Vec<u64>>() * shares + pixels * per_pixel
+        let give_way = 8 * height as usize * (width as usize).div_ceil(64) + 4 * pixels;
+        capacity * per_point + bands * per_region + size_of::<Vec<u64>>() * shares + pixels * per_pixel + give_way
     }
 
     pub fn new(cfg: CacheConfig) -> Self {
@@ -378,6 +387,8 @@ impl RenderCache {
             frame: 0,
             zbufs: vec![vec![EMPTY_KEY; pixels]],
             zmin_row: vec![u32::MAX; pixels],
+            give_way: vec![0; cfg.height as usize * (cfg.width as usize).div_ceil(64)],
+            display: vec![0; pixels],
             proj: vec![Projected::NONE; capacity],
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],

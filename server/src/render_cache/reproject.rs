@@ -163,10 +163,11 @@ impl RenderCache {
             pi.subpixel.par_chunks_mut(w),
             pi.color.par_chunks_mut(w),
             pi.age.par_chunks_mut(w),
+            pi.born.par_chunks_mut(w),
         )
             .into_par_iter()
             .enumerate()
-            .map(|(y, (pt, dp, sp, col, ag))| build_row(&ctx, y, pt, dp, sp, col, ag))
+            .map(|(y, (pt, dp, sp, col, ag, bo))| build_row(&ctx, y, pt, dp, sp, col, ag, bo))
             .sum()
     }
 }
@@ -271,7 +272,8 @@ struct RowContext<'a> {
 /// each other and short, so many of their cache misses overlap (pool regions keep them
 /// local).
 #[inline(never)]
-fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32]) -> u32 {
+#[allow(clippy::too_many_arguments)]
+fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) -> u32 {
     let (w, h) = (c.w, c.h);
     let t = 1.0 + DEPTH_CULL_RELATIVE;
     let mut culled = 0u32;
@@ -312,6 +314,7 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
             sp[x] = [0.0; 2];
             col[x] = Vec3::ZERO;
             ag[x] = f32::INFINITY;
+            bo[x] = 0;
             continue;
         }
         let i = idx as usize;
@@ -320,6 +323,7 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
         let sh = c.shade[i];
         col[x] = sh.color;
         ag[x] = if c.flags[i] & FLAG_STALE != 0 { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
+        bo[x] = sh.born;
     }
     culled
 }

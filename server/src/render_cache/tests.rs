@@ -807,7 +807,7 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
     // out exactly when a point of its object (or, without objects, of a depth within 5 %)
     // within FRESH_RADIUS pixels in both axes is fresh or shaded in a later frame, and
     // disagrees with it in colour.
-    use super::fresh::{disagree, FRESH_RADIUS};
+    use super::fresh::{disagree, display_rgb, FRESH_RADIUS};
     let mut rng = Rng::new(41);
     let palette = [Vec3::splat(0.05), Vec3::splat(0.06), Vec3::splat(0.5), Vec3::new(0.5, 0.1, 0.1)];
     for case in 0..80 {
@@ -836,6 +836,7 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
                 _ => RenderCache::age_of(c.frame, born),
             };
             p.color[i] = if kind == 0 { Vec3::ZERO } else { c.pool.shade[i].color };
+            p.born[i] = if kind == 0 { 0 } else { born };
         }
         let before = c.points.clone();
         let with_objects = case % 2 == 0;
@@ -856,7 +857,7 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
                     }
                     let same = if with_objects { objects[j] == objects[i] } else { (before.depth[j] - before.depth[i]).abs() <= 0.05 * before.depth[i] };
                     let trusted = before.age[j] < STALE_AGE || c.pool.shade[j].born > c.pool.shade[i].born;
-                    same && trusted && disagree(before.color[i], before.color[j])
+                    same && trusted && disagree(display_rgb(before.color[i]), display_rgb(before.color[j]))
                 });
                 let gone = stale && newer_near;
                 expect += gone as u32;
@@ -870,7 +871,9 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
         assert_eq!(hidden, expect);
     }
     // The colour test itself: display-like differences.
-    assert!(disagree(Vec3::splat(0.05), Vec3::splat(0.5)));
-    assert!(!disagree(Vec3::splat(0.05), Vec3::splat(0.06)));
-    assert!(!disagree(Vec3::splat(0.5), Vec3::splat(0.55)));
+    let d = |a: Vec3, b: Vec3| disagree(display_rgb(a), display_rgb(b));
+    assert!(d(Vec3::splat(0.05), Vec3::splat(0.5)));
+    assert!(d(Vec3::new(0.5, 0.5, 0.05), Vec3::splat(0.5)), "one channel is enough");
+    assert!(!d(Vec3::splat(0.05), Vec3::splat(0.06)));
+    assert!(!d(Vec3::splat(0.5), Vec3::splat(0.55)));
 }

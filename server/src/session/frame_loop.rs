@@ -25,7 +25,8 @@ use crate::encode::{effective_encoding, FrameEncoder};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
-use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample, STAGE_REPROJECT};
+use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
+use crate::render_cache::fresh::STAGE_STALE;
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
 use crate::visibility::{Visibility, STAGE_VISIBILITY};
@@ -318,7 +319,7 @@ impl FrameLoop {
         // Points shaded before a move that may have changed them give way to fresh ones.
         let t = Instant::now();
         self.cache.hide_stale_near_fresh(Some(self.visibility.objects()));
-        self.times.add(STAGE_REPROJECT, ms_since(t));
+        self.times.add(STAGE_STALE, ms_since(t));
         let epi_counts = build.then(|| {
             let centre_lines = epr && s.complex_filter;
             self.epi.build(&self.edges, &self.cam_frame, self.cache.point_image(), centre_lines, &mut self.times)

@@ -81,30 +81,6 @@ fn soup(rng: &mut Rng, n: usize, size: f32) -> Mesh {
     Mesh::from_triangles(p, t, &NoProgress)
 }
 
-/// A closed grid-like surface: a sphere as a latitude/longitude mesh (shared edges, so
-/// cracks between neighbouring triangles would show).
-fn sphere(stacks: u32, slices: u32) -> Mesh {
-    let mut p = Vec::new();
-    for i in 0..=stacks {
-        let th = std::f32::consts::PI * i as f32 / stacks as f32;
-        for j in 0..slices {
-            let ph = std::f32::consts::TAU * j as f32 / slices as f32;
-            p.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
-        }
-    }
-    let mut t = Vec::new();
-    for i in 0..stacks {
-        for j in 0..slices {
-            let a = i * slices + j;
-            let b = i * slices + (j + 1) % slices;
-            let (c, d) = (a + slices, b + slices);
-            t.push([a, b, d]);
-            t.push([a, d, c]);
-        }
-    }
-    Mesh::from_triangles(p, t, &NoProgress)
-}
-
 fn scene_of(meshes: Vec<Mesh>) -> Scene {
     Scene {
         name: "t".into(),
@@ -179,7 +155,7 @@ fn depth_equals_ray_casting_every_triangle_on_random_soups() {
 
 #[test]
 fn a_closed_mesh_has_no_cracks_and_matches_ray_casting() {
-    let scene = scene_of(vec![sphere(23, 37)]);
+    let scene = scene_of(vec![edgepoint_scene::builtin::shapes::sphere(1.0, 37, 23)]);
     let tf = [Affine3A::from_rotation_y(0.3)];
     for eye in [Vec3::new(0.3, 0.4, 3.0), Vec3::new(2.0, -1.5, 1.0), Vec3::new(0.1, 0.2, 0.3)] {
         let cam = Camera { eye, target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 60.0 };
