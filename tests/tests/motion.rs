@@ -18,7 +18,7 @@ fn motion(args: &[&str]) -> Value {
     let out = Command::new(bench)
         .arg("motion")
         .args(args)
-        .args(["--width", "160", "--height", "160", "--frames", "30", "--max-fps", "8", "--reference-spp", "8", "--modes", "epr"])
+        .args(["--width", "256", "--height", "256", "--frames", "30", "--max-fps", "8", "--reference-spp", "8", "--modes", "epr"])
         .args(["--worker-threads", "1", "--json", "--ref-cache"])
         .arg(&refs)
         .env("RUST_LOG", "warn")
