@@ -132,7 +132,13 @@ fn small_structures_bytes_for_match_their_constructors() {
         drop(x);
         // The object-aware fill on a frame where every pixel is a hole but one.
         let words = (w as usize).div_ceil(64);
-        let mut holes = vec![u64::MAX; words * h as usize];
+        // Every pixel a hole (the bits past the row's end stay clear, as the EPI leaves them).
+        let mut holes = vec![0u64; words * h as usize];
+        for y in 0..h as usize {
+            for x in 0..w as usize {
+                holes[y * words + x / 64] |= 1 << (x % 64);
+            }
+        }
         holes[0] &= !1;
         let objects = vec![0u32; (w * h) as usize];
         let mut image = vec![Vec3::ONE; (w * h) as usize];
