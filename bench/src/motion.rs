@@ -525,12 +525,12 @@ fn measure(args: &MotionArgs, rec: &Recorded, refs: &[Vec<Vec3>], truth: &Truth,
             continue;
         }
         let mut done = None;
-        for j in k..rec.frames.len() {
+        for (j, outliers) in outliers_per_frame.iter().enumerate().take(rec.frames.len()).skip(k) {
             let (mut inview, mut right) = (0usize, 0usize);
             for &(o, l) in cohort {
                 if let Some(i) = truth.seen_at(j, o, l) {
                     inview += 1;
-                    right += usize::from(!outliers_per_frame[j][i]);
+                    right += usize::from(!outliers[i]);
                 }
             }
             if inview == 0 {

@@ -62,6 +62,21 @@ pub fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     a + ab * (vb * den) + ac * (vc * den)
 }
 
+/// The eight corners of the box [`lo`, `hi`] (bit 0 of the index picks x, bit 1 y, bit 2 z).
+pub fn box_corners((lo, hi): (Vec3, Vec3)) -> [Vec3; 8] {
+    std::array::from_fn(|i| {
+        Vec3::new(if i & 1 == 0 { lo.x } else { hi.x }, if i & 2 == 0 { lo.y } else { hi.y }, if i & 4 == 0 { lo.z } else { hi.z })
+    })
+}
+
+/// The axis-aligned box around the box `b` transformed by `t` (an object's world box).
+pub fn transformed_box(t: &glam::Affine3A, b: (Vec3, Vec3)) -> (Vec3, Vec3) {
+    box_corners(b).iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), c| {
+        let w = t.transform_point3(*c);
+        (lo.min(w), hi.max(w))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -78,19 +93,4 @@ mod tests {
         assert_eq!(closest_on_triangle(Vec3::new(2.0, -0.5, 0.0), a, b, c), b);
         assert!((closest_on_triangle(Vec3::new(1.0, 1.0, 0.0), a, b, c) - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);
     }
-}
-
-/// The eight corners of the box [`lo`, `hi`] (bit 0 of the index picks x, bit 1 y, bit 2 z).
-pub fn box_corners((lo, hi): (Vec3, Vec3)) -> [Vec3; 8] {
-    std::array::from_fn(|i| {
-        Vec3::new(if i & 1 == 0 { lo.x } else { hi.x }, if i & 2 == 0 { lo.y } else { hi.y }, if i & 4 == 0 { lo.z } else { hi.z })
-    })
-}
-
-/// The axis-aligned box around the box `b` transformed by `t` (an object's world box).
-pub fn transformed_box(t: &glam::Affine3A, b: (Vec3, Vec3)) -> (Vec3, Vec3) {
-    box_corners(b).iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), c| {
-        let w = t.transform_point3(*c);
-        (lo.min(w), hi.max(w))
-    })
 }

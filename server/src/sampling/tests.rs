@@ -108,7 +108,7 @@ fn older_points_get_more_samples_and_unreached_pixels_most() {
     assert!(priority(1.0, 10.0, 120.0) < priority(1.0, 100.0, 120.0));
     assert_eq!(priority(1.0, 1e8, 120.0), PRIORITY_OLD_POINT);
     assert_eq!(priority(1.0, crate::render_cache::STALE_AGE, 120.0), PRIORITY_STALE_POINT);
-    assert!(PRIORITY_OLD_POINT < PRIORITY_STALE_POINT && PRIORITY_STALE_POINT < PRIORITY_UNREACHED);
+    const { assert!(PRIORITY_OLD_POINT < PRIORITY_STALE_POINT && PRIORITY_STALE_POINT < PRIORITY_UNREACHED) };
     assert_eq!(priority(1.0, 500.0, 120.0), PRIORITY_OLD_POINT);
     assert!(priority(f32::NAN, 0.0, 120.0).is_finite());
     assert!(PRIORITY_OLD_POINT < priority(1.0, f32::INFINITY, 120.0));

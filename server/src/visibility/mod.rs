@@ -365,7 +365,8 @@ impl InvDepth {
         let (a, b, c) = (t[0], t[1], t[2]);
         let n = (b - a).cross(c - a);
         let k = n.dot(a);
-        if !(k.abs() > 0.0) || !k.is_finite() {
+        // Also refuses a NaN (every comparison with it is false).
+        if k.abs().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !k.is_finite() {
             return None;
         }
         // Ray direction through pixel centre (x + 0.5, y + 0.5) in view space:
@@ -381,7 +382,8 @@ impl InvDepth {
 /// values are whole numbers already.
 #[inline]
 fn floor(x: f32) -> f32 {
-    if !(x.abs() < 8_388_608.0) {
+    // Large, infinite or NaN: already whole, or nothing to round.
+    if x.abs().partial_cmp(&8_388_608.0) != Some(std::cmp::Ordering::Less) {
         return x;
     }
     let t = x as i32 as f32;
