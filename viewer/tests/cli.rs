@@ -268,11 +268,9 @@ fn a_server_that_never_answers_start_times_out() {
             held.push(s); // accepted, never answered
         }
     });
-    let t = std::time::Instant::now();
     let o = viewer(&["--server", &format!("http://{addr}"), "--headless", "--frames", "1", "--start-timeout-secs", "2"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("did not answer `start` within 2 s"), "{}", stderr(&o));
-    assert!(t.elapsed() < std::time::Duration::from_secs(60), "liveness guard");
 }
 
 /// Issue 12 item 15: under `cargo run` the viewer builds the server and the worker with the

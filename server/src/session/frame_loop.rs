@@ -316,7 +316,8 @@ impl FrameLoop {
         self.visibility.update(&self.scene, &self.transforms, &self.cam_frame);
         self.times.add(STAGE_VISIBILITY, ms_since(t));
         let occluded = self.cache.reproject_points(&self.cam_frame, Some(self.visibility.cull()), &mut self.times);
-        // Points shaded before a move that may have changed them give way to fresh ones.
+        // Points shaded before a move that may have changed them give way to newer ones that
+        // disagree with them.
         let t = Instant::now();
         self.cache.hide_stale_near_fresh(Some(self.visibility.objects()));
         self.times.add(STAGE_STALE, ms_since(t));
