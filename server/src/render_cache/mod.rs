@@ -304,8 +304,17 @@ pub struct RenderCache {
     /// Per pixel: nearest depth (as `f32` bits, all ones for none) over the pixel and its
     /// left and right neighbours — the culling pre-test.
     zmin_row: Vec<u32>,
-    /// Per pixel, one bit: the stale point there gives way to a newer one (`fresh.rs`).
+    /// Per pixel, one bit: the stale point there gives way to a newer one (`fresh.rs`);
+    /// before that, in a still view, the pixels whose point was replaced (`reproject.rs`).
     give_way: Vec<u64>,
+    /// The view of the last full reprojection, and whether something since needs another
+    /// (points moved or removed other than by replacement).
+    last_view: Option<reproject::Projector>,
+    reproject_all: bool,
+    /// Since the last reprojection: slots written, and pixels whose nearest point was in one
+    /// of them. Bounded by [`MAX_INSERTED`]; beyond, the next frame reprojects everything.
+    inserted_slots: Vec<u32>,
+    lost_pixels: Vec<u32>,
     /// Per pixel: its point's colour as [`fresh::display_rgb`] packs it (`fresh.rs`).
     display: Vec<u32>,
     /// Per point: where it projected in the last frame.
@@ -313,6 +322,12 @@ pub struct RenderCache {
     points: PointImage,
     weights: Vec<f32>,
     image: Vec<Vec3>,
+}
+
+/// Inserts remembered between two reprojections of a still view (a frame asks for 1/64 of
+/// the pixels by default); more make the next reprojection a full one.
+fn max_inserted(pixels: usize) -> usize {
+    (pixels / 8).max(1024)
 }
 
 /// Pool capacity of a cache of `pixels` pixels ([`CacheConfig::points_per_pixel`] clamped).
@@ -340,7 +355,7 @@ impl RenderCache {
         let per_region = size_of::<Region>() + 64 * size_of::<(u64, u32)>();
         let shares = threads.clamp(1, 16).min(capacity.max(1));
         let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>();
-        let give_way = 8 * height as usize * (width as usize).div_ceil(64) + 4 * pixels;
+        let give_way = 8 * height as usize * (width as usize).div_ceil(64) + 4 * pixels + 2 * 4 * max_inserted(pixels);
         capacity * per_point + bands * per_region + size_of::<Vec<u64>>() * shares + pixels * per_pixel + give_way
     }
 
@@ -389,6 +404,10 @@ impl RenderCache {
             zmin_row: vec![u32::MAX; pixels],
             give_way: vec![0; cfg.height as usize * (cfg.width as usize).div_ceil(64)],
             display: vec![0; pixels],
+            last_view: None,
+            reproject_all: true,
+            inserted_slots: Vec::with_capacity(max_inserted(pixels)),
+            lost_pixels: Vec::with_capacity(max_inserted(pixels)),
             proj: vec![Projected::NONE; capacity],
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],
@@ -423,6 +442,7 @@ impl RenderCache {
         let Some(slot) = self.take_slot(band) else { return false };
         let i = slot as usize;
         let born = self.frame;
+        self.note_replaced(i);
         let p = &mut self.pool;
         if p.flags[i] & FLAG_VALID == 0 {
             self.valid += 1;
@@ -479,6 +499,24 @@ impl RenderCache {
         None
     }
 
+    /// Remembers that slot `i` is about to be written, for the next reprojection of a still
+    /// view: its new point needs projecting, and the pixel its old point was nearest in
+    /// needs recomputing.
+    fn note_replaced(&mut self, i: usize) {
+        if self.reproject_all {
+            return;
+        }
+        if self.inserted_slots.len() >= self.inserted_slots.capacity() {
+            self.reproject_all = true;
+            return;
+        }
+        let pr = self.proj[i];
+        if pr.pixel != NO_POINT && self.zbufs[0][pr.pixel as usize] as u32 as usize == i {
+            self.lost_pixels.push(pr.pixel);
+        }
+        self.inserted_slots.push(i as u32);
+    }
+
     /// Index of the region holding slot `i`.
     fn region_of(&self, i: u32) -> usize {
         self.regions.partition_point(|r| r.end <= i)
@@ -513,6 +551,7 @@ impl RenderCache {
         let mut sorted = objects.to_vec();
         sorted.sort_unstable();
         sorted.dedup();
+        self.reproject_all = true;
         for i in 0..self.capacity {
             let p = &mut self.pool;
             if p.flags[i] & FLAG_VALID != 0 && sorted.binary_search(&p.object[i]).is_ok() {
@@ -587,6 +626,7 @@ impl RenderCache {
 
     /// Removes every point.
     pub fn clear(&mut self) {
+        self.reproject_all = true;
         self.pool.flags.iter_mut().for_each(|f| *f = 0);
         for r in &mut self.regions {
             r.free.clear();
@@ -681,6 +721,7 @@ impl RenderCache {
             * glam::DAffine3::from_cols_array(&from.to_cols_array().map(f64::from)).inverse();
         let d = glam::Affine3A::from_cols_array(&d.to_cols_array().map(|v| v as f32));
         let normal_matrix = glam::Mat3::from(d.matrix3).inverse().transpose();
+        self.reproject_all = true;
         let p = &mut self.pool;
         let mut moved = 0;
         for i in 0..self.capacity {

@@ -36,6 +36,15 @@ impl Projector {
         Self { eye: cam.eye, rx, uy, f, cx, cy, width: cam.width, height: cam.height, wf: cam.width as f32, hf: cam.height as f32 }
     }
 
+    /// Whether `other` projects every point exactly as this does (bitwise the same view).
+    pub(crate) fn same_as(&self, other: &Projector) -> bool {
+        let bits = |p: &Projector| {
+            let v = [p.eye, p.rx, p.uy, p.f].map(|v| v.to_array().map(f32::to_bits));
+            (v, [p.cx, p.cy, p.wf, p.hf].map(f32::to_bits), p.width, p.height)
+        };
+        bits(self) == bits(other)
+    }
+
     /// Projects a cached point: a hit is a world position, a miss a direction (a point at
     /// infinity, view depth `+inf`). Returns continuous pixel coordinates and view depth, or
     /// `None` behind (or too near) the eye. Agrees with `CameraFrame::project` up to
@@ -125,9 +134,21 @@ impl RenderCache {
         }
         let share = self.capacity.div_ceil(shares).max(1);
 
+        let prj = Projector::new(cam);
+        // The same view as last frame and no point moved: only the points inserted since
+        // need projecting (see `reproject_inserted`).
+        let same_view = self.last_view.is_some_and(|v| v.same_as(&prj));
+        if same_view && !self.reproject_all {
+            self.reproject_inserted(&prj);
+            return self.build_point_image(geometry);
+        }
+        self.reproject_all = false;
+        self.last_view = Some(prj);
+        self.inserted_slots.clear();
+        self.lost_pixels.clear();
+
         // Pass 1, over points: project, nearest per pixel into the share's depth buffer.
         let pool = &self.pool;
-        let prj = Projector::new(cam);
         self.zbufs.par_iter_mut().for_each(|z| z.fill(EMPTY_KEY));
         self.zbufs.par_iter_mut().zip(self.proj.par_chunks_mut(share)).enumerate().for_each(|(k, (zbuf, proj))| {
             let base = k * share;
@@ -142,9 +163,59 @@ impl RenderCache {
         // row neighbours.
         let (z0, rest) = self.zbufs.split_first_mut().expect("at least one depth buffer");
         z0.par_chunks_mut(w).zip(self.zmin_row.par_chunks_mut(w)).enumerate().for_each(|(y, (zrow, mrow))| merge_row(rest, y, zrow, mrow));
+        self.build_point_image(geometry)
+    }
 
-        // Pass 2, over rows: depth culling against the 3x3 neighbourhood, then the point
-        // image.
+    /// Pass 1 for a still view: the depth buffer of the last frame stays, less the entries
+    /// of points replaced since (their pixels are recomputed from every point that landed
+    /// there, read from `proj`), plus the points inserted since. The result equals a full
+    /// pass 1 (the tests compare them): the same arithmetic, the same keys.
+    fn reproject_inserted(&mut self, prj: &Projector) {
+        let w = self.cfg.width as usize;
+        let words = w.div_ceil(64);
+        let z0 = &mut self.zbufs[0];
+        let lost = &mut self.give_way;
+        if !self.lost_pixels.is_empty() {
+            lost.iter_mut().for_each(|b| *b = 0);
+            for &p in &self.lost_pixels {
+                let p = p as usize;
+                lost[(p / w) * words + (p % w) / 64] |= 1 << (p % w % 64);
+                z0[p] = EMPTY_KEY;
+            }
+            for (i, pr) in self.proj.iter().enumerate() {
+                let p = pr.pixel as usize;
+                if pr.pixel != NO_POINT && lost[(p / w) * words + (p % w) / 64] >> (p % w % 64) & 1 != 0 {
+                    let key = key_of(pr.depth, i);
+                    if key < z0[p] {
+                        z0[p] = key;
+                    }
+                }
+            }
+        }
+        let pool = &self.pool;
+        for &i in &self.inserted_slots {
+            let i = i as usize;
+            let flag = pool.flags[i];
+            let math = project_math(prj, flag, (pool.px[i], pool.py[i], pool.pz[i]), (pool.nx[i], pool.ny[i], pool.nz[i]));
+            self.proj[i] = Projected::NONE;
+            if let Some((p, placed)) = place(prj, flag, math) {
+                self.proj[i] = placed;
+                let key = key_of(placed.depth, i);
+                if key < z0[p] {
+                    z0[p] = key;
+                }
+            }
+        }
+        self.inserted_slots.clear();
+        self.lost_pixels.clear();
+        z0.par_chunks_mut(w).zip(self.zmin_row.par_chunks_mut(w)).for_each(|(zrow, mrow)| merge_row(&[], 0, zrow, mrow));
+    }
+
+    /// Pass 2, over rows: depth culling against the 3x3 neighbourhood, then the point
+    /// image. Returns the number of culled points.
+    fn build_point_image(&mut self, geometry: Option<GeometryCull>) -> u32 {
+        let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
+        let pool = &self.pool;
         let ctx = RowContext {
             zbuf: &self.zbufs[0],
             zmin_row: &self.zmin_row,
@@ -175,6 +246,57 @@ impl RenderCache {
 /// Points per block of pass 1.
 const BLOCK: usize = 256;
 
+/// The arithmetic of pass 1 for one point (position `x, y, zz` as stored, normal `n`,
+/// `flag` its flags): view depth, continuous pixel coordinates and the facing value
+/// n · (p − eye). Inlined into the vectorised loop of [`project_share`] and called alone for
+/// single points, so both give identical results.
+#[inline(always)]
+fn project_math(prj: &Projector, flag: u8, (px, py, pz): (f32, f32, f32), (nx, ny, nz): (i16, i16, i16)) -> (f32, f32, f32, f32) {
+    let (e, r, u, f) = (prj.eye, prj.rx, prj.uy, prj.f);
+    // 1 for a hit (subtract the eye), 0 for a miss direction.
+    let hm = f32::from((flag >> 1) & 1);
+    let (x, y, zz) = (px - e.x * hm, py - e.y * hm, pz - e.z * hm);
+    let z = x * f.x + y * f.y + zz * f.z;
+    let inv = 1.0 / z;
+    // n · (p - eye): negative when the eye is on the side the point was shaded from
+    // (a zero normal, unknown side, or a miss gives zero and passes).
+    let facing = f32::from(nx) * x + f32::from(ny) * y + f32::from(nz) * zz;
+    let sx = prj.cx + (x * r.x + y * r.y + zz * r.z) * inv;
+    let sy = prj.cy - (x * u.x + y * u.y + zz * u.z) * inv;
+    (z, sx, sy, facing)
+}
+
+/// Where a projected point lands ([`project_math`]'s results): its pixel and projection, or
+/// `None` when it is invalid, off-screen, behind the eye or facing away.
+#[inline(always)]
+fn place(prj: &Projector, flag: u8, (z, sx, sy, facing): (f32, f32, f32, f32)) -> Option<(usize, Projected)> {
+    let (wmax, hmax) = (prj.width as i64 - 1, prj.height as i64 - 1);
+    // Negated comparisons so that NaN is dropped too. A point whose surface turned
+    // away from the eye is hidden by that surface itself: it shows no more (its
+    // shading was computed for the other side), wherever it lands.
+    let visible = z > 1e-6 && sx >= 0.0 && sy >= 0.0 && sx < prj.wf && sy < prj.hf && facing <= 0.0;
+    if flag & FLAG_VALID == 0 || !visible {
+        return None;
+    }
+    // SAFETY: finite and in [0, 2^32) after the test above.
+    let (px, py) = unsafe { (sx.to_int_unchecked::<i64>(), sy.to_int_unchecked::<i64>()) };
+    let px = if px > wmax { wmax } else { px };
+    let py = if py > hmax { hmax } else { py };
+    let (fx, fy) = ((sx - px as f32) * 65536.0, (sy - py as f32) * 65536.0);
+    // SAFETY: in [0, 65536] before the comparison, so in range of i32 after it.
+    let fx = unsafe { (if fx < 65535.0 { fx } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
+    let fy = unsafe { (if fy < 65535.0 { fy } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
+    let p = py as usize * prj.width as usize + px as usize;
+    let depth = if flag & FLAG_HIT != 0 { z } else { f32::INFINITY };
+    Some((p, Projected { pixel: p as u32, depth, fx, fy }))
+}
+
+/// The depth-buffer key of point `i` at `depth`: nearest first, then the lowest index.
+#[inline(always)]
+fn key_of(depth: f32, i: usize) -> u64 {
+    (u64::from(depth.to_bits()) << 32) | i as u64
+}
+
 /// Pass 1 for one share of the points (slots `base..`): project each valid point, record
 /// where it went, keep the nearest per pixel in `zbuf`. Per block of points, a branch-free
 /// loop over the coordinate arrays projects them (the compiler vectorises it, four points
@@ -183,9 +305,6 @@ const BLOCK: usize = 256;
 /// check the cache against it).
 #[inline(never)]
 fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], normals: [&[i16]; 3], proj: &mut [Projected], zbuf: &mut [u64]) {
-    let w = prj.width as usize;
-    let (wmax, hmax) = (prj.width as i64 - 1, prj.height as i64 - 1);
-    let (e, r, u, f) = (prj.eye, prj.rx, prj.uy, prj.f);
     let (mut zs, mut sxs, mut sys) = ([0f32; BLOCK], [0f32; BLOCK], [0f32; BLOCK]);
     let mut facing = [0f32; BLOCK];
     for (b, proj) in proj.chunks_mut(BLOCK).enumerate() {
@@ -195,42 +314,16 @@ fn project_share(prj: &Projector, base: usize, flags: &[u8], xyz: [&[f32]; 3], n
         let (bx, by, bz) = (&xyz[0][start..start + n], &xyz[1][start..start + n], &xyz[2][start..start + n]);
         let (nx, ny, nz) = (&normals[0][start..start + n], &normals[1][start..start + n], &normals[2][start..start + n]);
         for k in 0..n {
-            // 1 for a hit (subtract the eye), 0 for a miss direction.
-            let hm = f32::from((fl[k] >> 1) & 1);
-            let (x, y, zz) = (bx[k] - e.x * hm, by[k] - e.y * hm, bz[k] - e.z * hm);
-            let z = x * f.x + y * f.y + zz * f.z;
-            let inv = 1.0 / z;
-            zs[k] = z;
-            // n · (p - eye): negative when the eye is on the side the point was shaded from
-            // (a zero normal, unknown side, or a miss gives zero and passes).
-            facing[k] = f32::from(nx[k]) * x + f32::from(ny[k]) * y + f32::from(nz[k]) * zz;
-            sxs[k] = prj.cx + (x * r.x + y * r.y + zz * r.z) * inv;
-            sys[k] = prj.cy - (x * u.x + y * u.y + zz * u.z) * inv;
+            (zs[k], sxs[k], sys[k], facing[k]) = project_math(prj, fl[k], (bx[k], by[k], bz[k]), (nx[k], ny[k], nz[k]));
         }
         for (k, pr) in proj.iter_mut().enumerate() {
-            pr.pixel = NO_POINT;
-            let (z, sx, sy) = (zs[k], sxs[k], sys[k]);
-            // Negated comparisons so that NaN is dropped too. A point whose surface turned
-            // away from the eye is hidden by that surface itself: it shows no more (its
-            // shading was computed for the other side), wherever it lands.
-            let visible = z > 1e-6 && sx >= 0.0 && sy >= 0.0 && sx < prj.wf && sy < prj.hf && facing[k] <= 0.0;
-            if fl[k] & FLAG_VALID == 0 || !visible {
-                continue;
-            }
-            // SAFETY: finite and in [0, 2^32) after the test above.
-            let (px, py) = unsafe { (sx.to_int_unchecked::<i64>(), sy.to_int_unchecked::<i64>()) };
-            let px = if px > wmax { wmax } else { px };
-            let py = if py > hmax { hmax } else { py };
-            let (fx, fy) = ((sx - px as f32) * 65536.0, (sy - py as f32) * 65536.0);
-            // SAFETY: in [0, 65536] before the comparison, so in range of i32 after it.
-            let fx = unsafe { (if fx < 65535.0 { fx } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
-            let fy = unsafe { (if fy < 65535.0 { fy } else { 65535.0 }).to_int_unchecked::<i32>() } as u16;
-            let p = py as usize * w + px as usize;
-            let depth = if fl[k] & FLAG_HIT != 0 { z } else { f32::INFINITY };
-            *pr = Projected { pixel: p as u32, depth, fx, fy };
-            let key = (u64::from(depth.to_bits()) << 32) | (base + start + k) as u64;
-            if key < zbuf[p] {
-                zbuf[p] = key;
+            *pr = Projected::NONE;
+            if let Some((p, placed)) = place(prj, fl[k], (zs[k], sxs[k], sys[k], facing[k])) {
+                *pr = placed;
+                let key = key_of(placed.depth, base + start + k);
+                if key < zbuf[p] {
+                    zbuf[p] = key;
+                }
             }
         }
     }

@@ -877,3 +877,62 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
     assert!(!d(Vec3::splat(0.05), Vec3::splat(0.06)));
     assert!(!d(Vec3::splat(0.5), Vec3::splat(0.55)));
 }
+
+#[test]
+fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
+    // Two caches fed the same samples frame by frame; the second reprojects everything every
+    // frame. Still frames (new points replacing old ones, nearest points among them), a
+    // camera change, a moved object and removed objects in between: the depth buffers, the
+    // projections and the point images must be identical.
+    let (w, h) = (37u32, 29u32);
+    let mut rng = Rng::new(77);
+    let mut inc = cache(w, h, 0.6);
+    let mut full = cache(w, h, 0.6);
+    let mut cam = camera(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO, w, h);
+    let mut still_frames = 0;
+    for f in 0..40 {
+        if f == 15 {
+            cam = camera(Vec3::new(0.8, 0.4, 4.5), Vec3::ZERO, w, h);
+        }
+        if f == 22 {
+            let (a, b) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.1, 0.0, 0.0)));
+            inc.move_object(1, &a, &b);
+            full.move_object(1, &a, &b);
+        }
+        if f == 30 {
+            inc.invalidate_objects(&[2]);
+            full.invalidate_objects(&[2]);
+        }
+        for _ in 0..rng.below(300) {
+            let (x, y) = (rng.below(w as usize) as f32 + rng.unit(), rng.below(h as usize) as f32 + rng.unit());
+            let (o, d) = cam.ray(x, y);
+            let s = if rng.chance(0.1) {
+                miss(d, Vec3::splat(rng.unit()))
+            } else {
+                // Three layers (objects 0, 1, 2) so that new points win and lose pixels.
+                let object = rng.below(3) as u32;
+                let t = 3.0 + object as f32 * 0.7 + rng.unit() * 0.05;
+                let mut s = hit(o + d * t, Vec3::splat(rng.unit()), object);
+                s.normal = if rng.chance(0.2) { d } else { -d };
+                s
+            };
+            let s = at(s, x as u32, y as u32);
+            assert_eq!(inc.insert_aged(&s, false), full.insert_aged(&s, false));
+        }
+        full.reproject_all = true;
+        still_frames += usize::from(!inc.reproject_all && inc.last_view.is_some());
+        frame(&mut inc, &cam);
+        frame(&mut full, &cam);
+        assert_eq!(inc.zbufs[0], full.zbufs[0], "frame {f}: depth buffer");
+        for i in 0..inc.capacity {
+            let (a, b) = (inc.proj[i], full.proj[i]);
+            assert_eq!((a.pixel, a.depth.to_bits(), a.fx, a.fy), (b.pixel, b.depth.to_bits(), b.fx, b.fy), "frame {f}: projection of slot {i}");
+        }
+        let (a, b) = (inc.point_image(), full.point_image());
+        assert_eq!(a.point, b.point, "frame {f}");
+        assert_eq!(a.born, b.born);
+        assert_eq!(a.color, b.color);
+        assert_eq!(a.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>(), b.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>());
+    }
+    assert!(still_frames >= 25, "most frames took the still-view path ({still_frames})");
+}
