@@ -59,7 +59,7 @@ impl RenderCache {
         if w == 0 || h == 0 {
             return 0;
         }
-        if !p.age.par_iter().any(|&a| a == STALE_AGE) {
+        if self.stale_shown == 0 {
             return 0;
         }
         let words = w.div_ceil(64);

@@ -315,6 +315,9 @@ pub struct RenderCache {
     /// of them. Bounded by [`MAX_INSERTED`]; beyond, the next frame reprojects everything.
     inserted_slots: Vec<u32>,
     lost_pixels: Vec<u32>,
+    /// Stale points in the point image of the last reprojection (`fresh.rs` skips its pass
+    /// when there are none).
+    stale_shown: u32,
     /// Per pixel: its point's colour as [`fresh::display_rgb`] packs it (`fresh.rs`).
     display: Vec<u32>,
     /// Per point: where it projected in the last frame.
@@ -408,6 +411,7 @@ impl RenderCache {
             reproject_all: true,
             inserted_slots: Vec::with_capacity(max_inserted(pixels)),
             lost_pixels: Vec::with_capacity(max_inserted(pixels)),
+            stale_shown: 0,
             proj: vec![Projected::NONE; capacity],
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],

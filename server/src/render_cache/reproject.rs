@@ -212,7 +212,7 @@ impl RenderCache {
     }
 
     /// Pass 2, over rows: depth culling against the 3x3 neighbourhood, then the point
-    /// image. Returns the number of culled points.
+    /// image. Returns the number of culled points; counts the stale points shown.
     fn build_point_image(&mut self, geometry: Option<GeometryCull>) -> u32 {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
         let pool = &self.pool;
@@ -228,7 +228,7 @@ impl RenderCache {
             geometry,
         };
         let pi = &mut self.points;
-        (
+        let counts = (
             pi.point.par_chunks_mut(w),
             pi.depth.par_chunks_mut(w),
             pi.subpixel.par_chunks_mut(w),
@@ -239,7 +239,10 @@ impl RenderCache {
             .into_par_iter()
             .enumerate()
             .map(|(y, (pt, dp, sp, col, ag, bo))| build_row(&ctx, y, pt, dp, sp, col, ag, bo))
-            .sum()
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let (culled, stale) = counts;
+        self.stale_shown = stale;
+        culled
     }
 }
 
@@ -361,15 +364,15 @@ struct RowContext<'a> {
 }
 
 /// Pass 2 for row `y`: culls occluded points and writes the row of the point image. Returns
-/// the number of culled points. Two loops: the gathers of the second are independent of
+/// the number of culled points and of stale points shown. Two loops: the gathers of the second are independent of
 /// each other and short, so many of their cache misses overlap (pool regions keep them
 /// local).
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
-fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) -> u32 {
+fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) -> (u32, u32) {
     let (w, h) = (c.w, c.h);
     let t = 1.0 + DEPTH_CULL_RELATIVE;
-    let mut culled = 0u32;
+    let (mut culled, mut stale) = (0u32, 0u32);
     let row = &c.zbuf[y * w..(y + 1) * w];
     let m_above = &c.zmin_row[y.saturating_sub(1) * w..][..w];
     let m_here = &c.zmin_row[y * w..][..w];
@@ -415,8 +418,10 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
         sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
         let sh = c.shade[i];
         col[x] = sh.color;
-        ag[x] = if c.flags[i] & FLAG_STALE != 0 { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
+        let is_stale = c.flags[i] & FLAG_STALE != 0;
+        stale += u32::from(is_stale);
+        ag[x] = if is_stale { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
         bo[x] = sh.born;
     }
-    culled
+    (culled, stale)
 }

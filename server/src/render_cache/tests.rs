@@ -838,6 +838,8 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
             p.color[i] = if kind == 0 { Vec3::ZERO } else { c.pool.shade[i].color };
             p.born[i] = if kind == 0 { 0 } else { born };
         }
+        // Set by hand, so the count reprojection keeps is set by hand too.
+        c.stale_shown = c.points.age.iter().filter(|&&a| a == STALE_AGE).count() as u32;
         let before = c.points.clone();
         let with_objects = case % 2 == 0;
         let hidden = c.hide_stale_near_fresh(with_objects.then_some(&objects[..]));
