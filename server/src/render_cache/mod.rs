@@ -72,6 +72,21 @@ pub struct LightBound {
     pub radius: f32,
 }
 
+impl LightBound {
+    /// The box `region` grown by the light's radius: it holds every ray from a point to the
+    /// light's emitting surface where the ray crosses `region`, so testing the segment to
+    /// the light's centre against it is conservative.
+    pub fn grow(&self, (lo, hi): (Vec3, Vec3)) -> (Vec3, Vec3) {
+        (lo - Vec3::splat(self.radius), hi + Vec3::splat(self.radius))
+    }
+
+    /// Whether something inside `region` may block light from this light to `p`.
+    pub fn may_shadow(&self, p: Vec3, region: (Vec3, Vec3)) -> bool {
+        let (lo, hi) = self.grow(region);
+        segment_hits_box(p, self.center, lo, hi)
+    }
+}
+
 /// One shaded point sample as the worker returned it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
@@ -583,7 +598,10 @@ impl RenderCache {
             return 0;
         }
         let p = &mut self.pool;
-        let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| (l.center, region.0 - Vec3::splat(l.radius), region.1 + Vec3::splat(l.radius))).collect();
+        let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| {
+            let (lo, hi) = l.grow(region);
+            (l.center, lo, hi)
+        }).collect();
         const CHUNK: usize = 4096;
         p.flags
             .par_chunks_mut(CHUNK)

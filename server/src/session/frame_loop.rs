@@ -25,7 +25,7 @@ use crate::encode::{effective_encoding, FrameEncoder};
 use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
-use crate::render_cache::{segment_hits_box, CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
+use crate::render_cache::{CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
 use crate::render_cache::fresh::STAGE_STALE;
 use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
@@ -594,7 +594,7 @@ impl FrameLoop {
             return true;
         }
         self.recent_moves.iter().filter(|&&(e, _)| e > epoch).any(|&(_, (lo, hi))| {
-            self.lights.iter().any(|l| segment_hits_box(p, l.center, lo - glam::Vec3::splat(l.radius), hi + glam::Vec3::splat(l.radius)))
+            self.lights.iter().any(|l| l.may_shadow(p, (lo, hi)))
         })
     }
 
