@@ -221,9 +221,10 @@ impl ObjectFill {
         self.todo.extend_from_slice(holes);
         self.queued.clear();
         self.queued.resize(self.todo.len(), 0);
-        let bit = |v: &[u64], i: usize| v[(i / width) * words + (i % width) / 64] >> (i % width % 64) & 1 != 0;
-        let set = |v: &mut [u64], i: usize| v[(i / width) * words + (i % width) / 64] |= 1 << (i % width % 64);
-        let clear = |v: &mut [u64], i: usize| v[(i / width) * words + (i % width) / 64] &= !(1 << (i % width % 64));
+        let at = |i: usize| super::pixel_bit(width, i);
+        let bit = |v: &[u64], i: usize| v[at(i).0] & at(i).1 != 0;
+        let set = |v: &mut [u64], i: usize| v[at(i).0] |= at(i).1;
+        let clear = |v: &mut [u64], i: usize| v[at(i).0] &= !at(i).1;
         let neighbours = |i: usize| {
             let (x, y) = (i % width, i / width);
             [
@@ -234,7 +235,6 @@ impl ObjectFill {
             ]
         };
         // Round 0: holes beside a coloured pixel of their object.
-        self.round.clear();
         for (wi, &word) in holes.iter().enumerate() {
             let mut b = word;
             while b != 0 {

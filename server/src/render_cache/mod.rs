@@ -117,6 +117,14 @@ pub(crate) fn unorm(v: i16) -> f32 {
     f32::from(v) * (1.0 / 32767.0)
 }
 
+/// Where pixel `i` of a `width`-wide image lives in a bitmask of `ceil(width / 64)` words
+/// per row (the layout of the EPI's hole bits): its word and the bit in it.
+#[inline]
+pub(crate) fn pixel_bit(width: usize, i: usize) -> (usize, u64) {
+    let (y, x) = (i / width, i % width);
+    (y * width.div_ceil(64) + x / 64, 1 << (x % 64))
+}
+
 /// Whether the segment from `a` to `b` meets the box [`lo`, `hi`] (slab test).
 #[inline]
 pub fn segment_hits_box(a: Vec3, b: Vec3, lo: Vec3, hi: Vec3) -> bool {

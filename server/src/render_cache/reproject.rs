@@ -5,7 +5,7 @@
 //! rows merges them. A depth-buffer entry is `(depth bits << 32) | point index`, the
 //! minimum wins: positive `f32` bit patterns order like the floats, a point at infinity (a
 //! miss) is behind every hit, and equal depths go to the lower index.
-use super::{GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_STALE, FLAG_VALID, GEOMETRY_CULL_RELATIVE, STALE_AGE, NO_POINT};
+use super::{pixel_bit, GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_STALE, FLAG_VALID, GEOMETRY_CULL_RELATIVE, STALE_AGE, NO_POINT};
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -172,19 +172,19 @@ impl RenderCache {
     /// pass 1 (the tests compare them): the same arithmetic, the same keys.
     fn reproject_inserted(&mut self, prj: &Projector) {
         let w = self.cfg.width as usize;
-        let words = w.div_ceil(64);
         let z0 = &mut self.zbufs[0];
         let lost = &mut self.give_way;
         if !self.lost_pixels.is_empty() {
             lost.iter_mut().for_each(|b| *b = 0);
             for &p in &self.lost_pixels {
                 let p = p as usize;
-                lost[(p / w) * words + (p % w) / 64] |= 1 << (p % w % 64);
+                let (word, bit) = pixel_bit(w, p);
+                lost[word] |= bit;
                 z0[p] = EMPTY_KEY;
             }
             for (i, pr) in self.proj.iter().enumerate() {
                 let p = pr.pixel as usize;
-                if pr.pixel != NO_POINT && lost[(p / w) * words + (p % w) / 64] >> (p % w % 64) & 1 != 0 {
+                if pr.pixel != NO_POINT && lost[pixel_bit(w, p).0] & pixel_bit(w, p).1 != 0 {
                     let key = key_of(pr.depth, i);
                     if key < z0[p] {
                         z0[p] = key;
