@@ -67,6 +67,18 @@ pub struct Mesh {
     /// Object-space bounding box (min, max).
     pub bounds: (Vec3, Vec3),
     pub stats: WeldStats,
+    /// Per-corner shading attributes, one entry per triangle (aligned with `triangles`).
+    pub corners: Corners,
+}
+
+/// Shading normals and texture coordinates per triangle corner (OBJ `vn`/`vt`, glTF
+/// `NORMAL`/`TEXCOORD_0`). Kept per corner rather than per welded vertex: welding merges
+/// positions only, and a crease or UV seam gives one position several normals or UVs.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Corners {
+    /// Object-space shading normals (unit length or zero where the file gave none).
+    pub normals: Option<Vec<[Vec3; 3]>>,
+    pub uvs: Option<Vec<[glam::Vec2; 3]>>,
 }
 
 impl Mesh {
@@ -126,6 +138,7 @@ impl Mesh {
             edges: Vec::new(),
             bounds: (Vec3::ZERO, Vec3::ZERO),
             stats: WeldStats { input_vertices, input_triangles, degenerate_dropped, ..Default::default() },
+            corners: Corners::default(),
         };
         mesh.rebuild_derived(progress);
         mesh
