@@ -120,6 +120,8 @@ impl RenderCache {
         if hidden == 0 {
             return 0;
         }
+        // The point image no longer is what pass 2 made of the depth buffer.
+        self.point_image_from = None;
         let p = &mut self.points;
         for (y, bits) in self.give_way.chunks(words).enumerate() {
             for (k, &word) in bits.iter().enumerate() {

@@ -62,6 +62,9 @@ pub struct GeometryCull<'a> {
     pub far3: &'a [f32],
     /// Per pixel: 1 / depth of the surface at the pixel centre, 0 where none covers it.
     pub inverse_depth: &'a [f32],
+    /// Changes whenever the two images do (the visibility raster's draw count): a still
+    /// view reprojected against the same generation may update its point image in place.
+    pub generation: u64,
 }
 
 /// Where a light emits from, as shadow tests need it: every emitting point lies within
@@ -239,6 +242,10 @@ const FLAG_HIT: u8 = 2;
 /// shading frame is kept, so that newer points of the same surface can be preferred.
 const FLAG_STALE: u8 = 4;
 
+/// [`RenderCache::status`] bits: the pixel's nearest point was culled; its point is stale.
+pub(crate) const STATUS_CULLED: u8 = 1;
+pub(crate) const STATUS_STALE: u8 = 2;
+
 /// What pass 2 of reprojection reads of a winning point, packed so that one random access
 /// fetches it.
 #[derive(Debug, Clone, Copy, Default)]
@@ -328,7 +335,8 @@ pub struct RenderCache {
     /// left and right neighbours — the culling pre-test.
     zmin_row: Vec<u32>,
     /// Per pixel, one bit: the stale point there gives way to a newer one (`fresh.rs`);
-    /// before that, in a still view, the pixels whose point was replaced (`reproject.rs`).
+    /// before that, in a still view, the pixels whose point was replaced, then those whose
+    /// depth-buffer entry changed (`reproject.rs`).
     give_way: Vec<u64>,
     /// The view of the last full reprojection, and whether something since needs another
     /// (points moved or removed other than by replacement).
@@ -336,11 +344,25 @@ pub struct RenderCache {
     reproject_all: bool,
     /// Since the last reprojection: slots written, and pixels whose nearest point was in one
     /// of them. Bounded by [`MAX_INSERTED`]; beyond, the next frame reprojects everything.
-    inserted_slots: Vec<u32>,
+    /// With each slot its stamp and where it projects in the still view (computed on
+    /// insertion, while the point is in cache).
+    inserted_slots: Vec<(u32, u64, Projected)>,
     lost_pixels: Vec<u32>,
     /// Stale points in the point image of the last reprojection (`fresh.rs` skips its pass
-    /// when there are none).
+    /// when there are none), and points culled in it.
     stale_shown: u32,
+    culled_shown: u32,
+    /// Whether the point image, `status` and the counts are exactly what pass 2 made of the
+    /// depth buffer (nothing changed them since) and which geometry generation it culled
+    /// against (`Some(None)`: none): a still view then recomputes only the pixels near a
+    /// change of the depth buffer (`reproject.rs`).
+    point_image_from: Option<Option<u64>>,
+    /// Per pixel, pass 2's outcome: [`STATUS_CULLED`], [`STATUS_STALE`].
+    status: Vec<u8>,
+    /// Per pixel, one bit (layout of [`pixel_bit`]): pixels an incremental pass 2 recomputes.
+    recompute: Vec<u64>,
+    /// Pixels whose depth-buffer entry changed in an incremental pass 1.
+    changed: Vec<u32>,
     /// Per pixel: its point's colour as [`fresh::display_rgb`] packs it (`fresh.rs`).
     display: Vec<u32>,
     /// Per point: where it projected in the last frame.
@@ -381,7 +403,11 @@ impl RenderCache {
         let per_region = size_of::<Region>() + 64 * size_of::<(u64, u32)>();
         let shares = threads.clamp(1, 16).min(capacity.max(1));
         let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>();
-        let give_way = 8 * height as usize * (width as usize).div_ceil(64) + 4 * pixels + 2 * 4 * max_inserted(pixels);
+        // give_way and recompute (bit masks), display, status, the inserted and lost lists,
+        // the changed pixels.
+        let masks = 2 * 8 * height as usize * (width as usize).div_ceil(64);
+        let lists = (size_of::<(u32, u64, Projected)>() + 4 + 4 * 2) * max_inserted(pixels);
+        let give_way = masks + 4 * pixels + pixels + lists;
         capacity * per_point + bands * per_region + size_of::<Vec<u64>>() * shares + pixels * per_pixel + give_way
     }
 
@@ -435,6 +461,11 @@ impl RenderCache {
             inserted_slots: Vec::with_capacity(max_inserted(pixels)),
             lost_pixels: Vec::with_capacity(max_inserted(pixels)),
             stale_shown: 0,
+            culled_shown: 0,
+            point_image_from: None,
+            status: vec![0; pixels],
+            recompute: vec![0; cfg.height as usize * (cfg.width as usize).div_ceil(64)],
+            changed: Vec::with_capacity(2 * max_inserted(pixels)),
             proj: vec![Projected::NONE; capacity],
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],
@@ -486,6 +517,7 @@ impl RenderCache {
         p.stamp[i] = self.next_stamp;
         // Not part of the last frame: never taken for a hidden point.
         self.proj[i] = Projected::NONE;
+        self.project_inserted(i);
         let r = &mut self.regions[band];
         r.oldest.push_back((self.next_stamp, slot));
         self.next_stamp += 1;
@@ -541,7 +573,7 @@ impl RenderCache {
         if pr.pixel != NO_POINT && self.zbufs[0][pr.pixel as usize] as u32 as usize == i {
             self.lost_pixels.push(pr.pixel);
         }
-        self.inserted_slots.push(i as u32);
+        self.inserted_slots.push((i as u32, 0, Projected::NONE));
     }
 
     /// Index of the region holding slot `i`.
@@ -605,6 +637,8 @@ impl RenderCache {
         if lights.is_empty() || !(region.0.cmple(region.1).all()) {
             return 0;
         }
+        // Points turning stale change what the point image shows of them.
+        self.point_image_from = None;
         let p = &mut self.pool;
         let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| {
             let (lo, hi) = l.grow(region);
@@ -635,6 +669,7 @@ impl RenderCache {
     /// light or a shadowing object moved), so prioritized sampling re-shades it first and
     /// replacement takes it before fresh points, but it stays visible until replaced.
     pub fn mark_stale(&mut self) {
+        self.point_image_from = None;
         for f in self.pool.flags.iter_mut() {
             if *f & FLAG_VALID != 0 {
                 *f |= FLAG_STALE;

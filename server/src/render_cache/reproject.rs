@@ -5,7 +5,7 @@
 //! rows merges them. A depth-buffer entry is `(depth bits << 32) | point index`, the
 //! minimum wins: positive `f32` bit patterns order like the floats, a point at infinity (a
 //! miss) is behind every hit, and equal depths go to the lower index.
-use super::{pixel_bit, GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_STALE, FLAG_VALID, GEOMETRY_CULL_RELATIVE, STALE_AGE, NO_POINT};
+use super::{pixel_bit, GeometryCull, Projected, RenderCache, Shade, DEPTH_CULL_RELATIVE, EMPTY_KEY, FLAG_HIT, FLAG_STALE, FLAG_VALID, GEOMETRY_CULL_RELATIVE, STALE_AGE, STATUS_CULLED, STATUS_STALE, NO_POINT};
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -139,8 +139,12 @@ impl RenderCache {
         // need projecting (see `reproject_inserted`).
         let same_view = self.last_view.is_some_and(|v| v.same_as(&prj));
         if same_view && !self.reproject_all {
-            self.reproject_inserted(&prj);
-            return self.build_point_image(geometry);
+            // And pass 2 may recompute only the pixels around those whose depth-buffer
+            // entry changed, when its last result stands and it culls against the same
+            // geometry.
+            let in_place = self.point_image_from == Some(geometry.as_ref().map(|g| g.generation));
+            self.reproject_inserted(in_place);
+            return if in_place { self.update_point_image(geometry) } else { self.build_point_image(geometry) };
         }
         self.reproject_all = false;
         self.last_view = Some(prj);
@@ -169,11 +173,14 @@ impl RenderCache {
     /// Pass 1 for a still view: the depth buffer of the last frame stays, less the entries
     /// of points replaced since (their pixels are recomputed from every point that landed
     /// there, read from `proj`), plus the points inserted since. The result equals a full
-    /// pass 1 (the tests compare them): the same arithmetic, the same keys.
-    fn reproject_inserted(&mut self, prj: &Projector) {
+    /// pass 1 (the tests compare them): the same arithmetic, the same keys. With `track`,
+    /// the pixels whose entry may have changed go to `changed` and only their row minima
+    /// are recomputed (for [`Self::update_point_image`]).
+    fn reproject_inserted(&mut self, track: bool) {
         let w = self.cfg.width as usize;
         let z0 = &mut self.zbufs[0];
         let lost = &mut self.give_way;
+        self.changed.clear();
         if !self.lost_pixels.is_empty() {
             lost.iter_mut().for_each(|b| *b = 0);
             for &p in &self.lost_pixels {
@@ -182,33 +189,163 @@ impl RenderCache {
                 lost[word] |= bit;
                 z0[p] = EMPTY_KEY;
             }
-            for (i, pr) in self.proj.iter().enumerate() {
-                let p = pr.pixel as usize;
-                if pr.pixel != NO_POINT && lost[pixel_bit(w, p).0] & pixel_bit(w, p).1 != 0 {
-                    let key = key_of(pr.depth, i);
-                    if key < z0[p] {
-                        z0[p] = key;
-                    }
+            if track {
+                self.changed.extend_from_slice(&self.lost_pixels);
+            }
+            // Every point that landed on a lost pixel competes for it again: a scan of the
+            // projections in parallel chunks, each keeping its candidates.
+            let lost = &*lost;
+            let candidates: Vec<(u32, u64)> = self
+                .proj
+                .par_chunks(64 * 1024)
+                .enumerate()
+                .flat_map_iter(|(c, chunk)| {
+                    chunk.iter().enumerate().filter_map(move |(k, pr)| {
+                        let p = pr.pixel as usize;
+                        let (word, bit) = pixel_bit(w, p);
+                        (pr.pixel != NO_POINT && lost[word] & bit != 0).then(|| (pr.pixel, key_of(pr.depth, c * 64 * 1024 + k)))
+                    })
+                })
+                .collect();
+            for (p, key) in candidates {
+                let e = &mut z0[p as usize];
+                if key < *e {
+                    *e = key;
                 }
             }
         }
-        let pool = &self.pool;
-        for &i in &self.inserted_slots {
+        let stamps = &self.pool.stamp;
+        for &(i, stamp, placed) in &self.inserted_slots {
             let i = i as usize;
-            let flag = pool.flags[i];
-            let math = project_math(prj, flag, (pool.px[i], pool.py[i], pool.pz[i]), (pool.nx[i], pool.ny[i], pool.nz[i]));
-            self.proj[i] = Projected::NONE;
-            if let Some((p, placed)) = place(prj, flag, math) {
-                self.proj[i] = placed;
+            if stamps[i] != stamp {
+                // Written again since: a later entry holds its point.
+                continue;
+            }
+            self.proj[i] = placed;
+            if placed.pixel != NO_POINT {
+                let p = placed.pixel as usize;
                 let key = key_of(placed.depth, i);
                 if key < z0[p] {
                     z0[p] = key;
+                    if track {
+                        self.changed.push(p as u32);
+                    }
                 }
             }
         }
         self.inserted_slots.clear();
         self.lost_pixels.clear();
-        z0.par_chunks_mut(w).zip(self.zmin_row.par_chunks_mut(w)).for_each(|(zrow, mrow)| merge_row(&[], 0, zrow, mrow));
+        if track {
+            // The row minima of a pixel read it and its two row neighbours.
+            for &p in &self.changed {
+                let (y, x) = (p as usize / w, p as usize % w);
+                let (zrow, mrow) = (&z0[y * w..(y + 1) * w], &mut self.zmin_row[y * w..(y + 1) * w]);
+                for x in x.saturating_sub(1)..(x + 2).min(w) {
+                    mrow[x] = row_min(zrow, x);
+                }
+            }
+        } else {
+            z0.par_chunks_mut(w).zip(self.zmin_row.par_chunks_mut(w)).for_each(|(zrow, mrow)| merge_row(&[], 0, zrow, mrow));
+        }
+    }
+
+    /// Where the point just written to slot `i` lands in the still view, for the next
+    /// [`Self::reproject_inserted`]: computed now, while the point is in cache (its arrays,
+    /// read later at scattered slots, cost a cache miss each), by the same arithmetic as
+    /// pass 1. Nothing when the next reprojection is a full one.
+    pub(super) fn project_inserted(&mut self, i: usize) {
+        let Some(prj) = self.last_view.filter(|_| !self.reproject_all) else { return };
+        let Some(last) = self.inserted_slots.last_mut().filter(|e| e.0 as usize == i) else { return };
+        let pool = &self.pool;
+        let flag = pool.flags[i];
+        let math = project_math(&prj, flag, (pool.px[i], pool.py[i], pool.pz[i]), (pool.nx[i], pool.ny[i], pool.nz[i]));
+        *last = (i as u32, pool.stamp[i], place(&prj, flag, math).map_or(Projected::NONE, |(_, placed)| placed));
+    }
+
+    /// Pass 2 of a still view, in place: the last point image stands except around the
+    /// pixels whose depth-buffer entry changed (`changed`) — a pixel's outcome reads the
+    /// depth buffer over its 3x3 neighbourhood only — and for the ages, which grow by a
+    /// frame. Recomputes those pixels exactly as [`Self::build_point_image`] would and keeps
+    /// the counts by the difference (the tests compare the two).
+    fn update_point_image(&mut self, geometry: Option<GeometryCull>) -> u32 {
+        let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
+        let words = w.div_ceil(64);
+        let mask = &mut self.recompute;
+        mask.iter_mut().for_each(|b| *b = 0);
+        let changed = &mut self.give_way;
+        changed.iter_mut().for_each(|b| *b = 0);
+        for &p in &self.changed {
+            let (y, x) = (p as usize / w, p as usize % w);
+            changed[y * words + x / 64] |= 1 << (x % 64);
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    mask[yy * words + xx / 64] |= 1 << (xx % 64);
+                }
+            }
+        }
+        self.changed.clear();
+        let pool = &self.pool;
+        let ctx = RowContext {
+            zbuf: &self.zbufs[0],
+            zmin_row: &self.zmin_row,
+            proj: &self.proj,
+            shade: &pool.shade,
+            flags: &pool.flags,
+            frame: self.frame,
+            w,
+            h,
+            geometry,
+        };
+        let pi = &mut self.points;
+        let frame = self.frame;
+        let (dc, ds) = (
+            pi.point.par_chunks_mut(w),
+            pi.depth.par_chunks_mut(w),
+            pi.subpixel.par_chunks_mut(w),
+            pi.color.par_chunks_mut(w),
+            pi.age.par_chunks_mut(w),
+            pi.born.par_chunks_mut(w),
+            self.status.par_chunks_mut(w),
+            self.recompute.par_chunks(words),
+            self.give_way.par_chunks(words),
+        )
+            .into_par_iter()
+            .enumerate()
+            .map(|(y, (pt, dp, sp, col, ag, bo, st, bits, changed))| {
+                // Ages first (a stale point's stays STALE_AGE; a missing point's infinity).
+                for (a, &b) in ag.iter_mut().zip(bo.iter()) {
+                    if *a < STALE_AGE {
+                        *a = RenderCache::age_of(frame, b);
+                    }
+                }
+                let (mut dc, mut ds) = (0i64, 0i64);
+                for (k, &word) in bits.iter().enumerate() {
+                    let mut b = word;
+                    while b != 0 {
+                        let x = k * 64 + b.trailing_zeros() as usize;
+                        b &= b - 1;
+                        let (old, old_point) = (st[x], pt[x]);
+                        let kept = cull_pixel(&ctx, y, x, pt, dp, st);
+                        // Around a changed pixel the nearest point is the same one: only
+                        // whether it is culled may change (the point read costs a cache miss).
+                        let same = changed[k] & (1 << (x % 64)) == 0 && old_point == pt[x];
+                        if same {
+                            st[x] |= old & STATUS_STALE;
+                        } else if kept {
+                            fill_pixel(&ctx, x, pt, sp, col, ag, bo, st);
+                        } else {
+                            clear_pixel(x, sp, col, ag, bo);
+                        }
+                        dc += i64::from(st[x] & STATUS_CULLED) - i64::from(old & STATUS_CULLED);
+                        ds += i64::from((st[x] & STATUS_STALE) >> 1) - i64::from((old & STATUS_STALE) >> 1);
+                    }
+                }
+                (dc, ds)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        self.culled_shown = (i64::from(self.culled_shown) + dc) as u32;
+        self.stale_shown = (i64::from(self.stale_shown) + ds) as u32;
+        self.culled_shown
     }
 
     /// Pass 2, over rows: depth culling against the 3x3 neighbourhood, then the point
@@ -235,13 +372,16 @@ impl RenderCache {
             pi.color.par_chunks_mut(w),
             pi.age.par_chunks_mut(w),
             pi.born.par_chunks_mut(w),
+            self.status.par_chunks_mut(w),
         )
             .into_par_iter()
             .enumerate()
-            .map(|(y, (pt, dp, sp, col, ag, bo))| build_row(&ctx, y, pt, dp, sp, col, ag, bo))
+            .map(|(y, (pt, dp, sp, col, ag, bo, st))| build_row(&ctx, y, pt, dp, sp, col, ag, bo, st))
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         let (culled, stale) = counts;
         self.stale_shown = stale;
+        self.culled_shown = culled;
+        self.point_image_from = Some(geometry.as_ref().map(|g| g.generation));
         culled
     }
 }
@@ -344,10 +484,16 @@ fn merge_row(rest: &[Vec<u64>], y: usize, zrow: &mut [u64], mrow: &mut [u32]) {
             *a = (*a).min(*b);
         }
     }
-    let bits = |x: usize| (zrow[x] >> 32) as u32;
     for (x, m) in mrow.iter_mut().enumerate() {
-        *m = bits(x.saturating_sub(1)).min(bits(x)).min(bits((x + 1).min(w - 1)));
+        *m = row_min(zrow, x);
     }
+}
+
+/// The nearest depth bits over pixel `x` of a depth-buffer row and its row neighbours.
+#[inline(always)]
+fn row_min(zrow: &[u64], x: usize) -> u32 {
+    let bits = |x: usize| (zrow[x] >> 32) as u32;
+    bits(x.saturating_sub(1)).min(bits(x)).min(bits((x + 1).min(zrow.len() - 1)))
 }
 
 /// What pass 2 reads.
@@ -363,65 +509,86 @@ struct RowContext<'a> {
     geometry: Option<GeometryCull<'a>>,
 }
 
-/// Pass 2 for row `y`: culls occluded points and writes the row of the point image. Returns
-/// the number of culled points and of stale points shown. Two loops: the gathers of the second are independent of
-/// each other and short, so many of their cache misses overlap (pool regions keep them
-/// local).
+/// Pass 2 for row `y`: culls occluded points and writes the row of the point image and of
+/// `status`. Returns the number of culled points and of stale points shown. Two loops: the
+/// gathers of the second are independent of each other and short, so many of their cache
+/// misses overlap (pool regions keep them local).
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
-fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) -> (u32, u32) {
-    let (w, h) = (c.w, c.h);
-    let t = 1.0 + DEPTH_CULL_RELATIVE;
+fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32], st: &mut [u8]) -> (u32, u32) {
     let (mut culled, mut stale) = (0u32, 0u32);
-    let row = &c.zbuf[y * w..(y + 1) * w];
-    let m_above = &c.zmin_row[y.saturating_sub(1) * w..][..w];
-    let m_here = &c.zmin_row[y * w..][..w];
-    let m_below = &c.zmin_row[(y + 1).min(h - 1) * w..][..w];
-    for (x, &key) in row.iter().enumerate() {
-        pt[x] = NO_POINT;
-        dp[x] = f32::INFINITY;
-        if key == EMPTY_KEY {
-            continue;
-        }
-        let dc = key_depth(key);
-        if let Some(g) = &c.geometry {
-            let i = y * w + x;
-            // Behind every surface around the pixel, or a background miss on a surface:
-            // hidden, whatever the neighbouring points say.
-            let hidden = if dc < f32::INFINITY { dc > g.far3[i] * (1.0 + GEOMETRY_CULL_RELATIVE) } else { g.inverse_depth[i] > 0.0 };
-            if hidden {
-                culled += 1;
-                continue;
-            }
-        }
-        // Cheap pre-test: without any neighbour nearer by the threshold the point cannot be
-        // occluded (most pixels stop here).
-        let nearest = f32::from_bits(m_above[x].min(m_here[x]).min(m_below[x]));
-        if nearest * t < dc && is_occluded(c.zbuf, w, h, x, y, dc) {
-            culled += 1;
-            continue;
-        }
-        pt[x] = key as u32;
-        dp[x] = dc;
+    for x in 0..c.w {
+        cull_pixel(c, y, x, pt, dp, st);
+        culled += u32::from(st[x] & STATUS_CULLED);
     }
-    for x in 0..w {
-        let idx = pt[x];
-        if idx == NO_POINT {
-            sp[x] = [0.0; 2];
-            col[x] = Vec3::ZERO;
-            ag[x] = f32::INFINITY;
-            bo[x] = 0;
-            continue;
+    for x in 0..c.w {
+        if pt[x] == NO_POINT {
+            clear_pixel(x, sp, col, ag, bo);
+        } else {
+            fill_pixel(c, x, pt, sp, col, ag, bo, st);
+            stale += u32::from(st[x] >> 1);
         }
-        let i = idx as usize;
-        let pr = c.proj[i];
-        sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
-        let sh = c.shade[i];
-        col[x] = sh.color;
-        let is_stale = c.flags[i] & FLAG_STALE != 0;
-        stale += u32::from(is_stale);
-        ag[x] = if is_stale { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
-        bo[x] = sh.born;
     }
     (culled, stale)
+}
+
+/// Pass 2's decision for pixel (x, y) of the row: its nearest point, unless culled by the
+/// geometry or as occluded by its neighbours. Writes `pt`, `dp` and `st` (the culled bit;
+/// the stale bit is [`fill_pixel`]'s); returns whether a point is kept.
+#[inline(always)]
+fn cull_pixel(c: &RowContext, y: usize, x: usize, pt: &mut [u32], dp: &mut [f32], st: &mut [u8]) -> bool {
+    let (w, h) = (c.w, c.h);
+    let key = c.zbuf[y * w + x];
+    pt[x] = NO_POINT;
+    dp[x] = f32::INFINITY;
+    st[x] = 0;
+    if key == EMPTY_KEY {
+        return false;
+    }
+    let dc = key_depth(key);
+    if let Some(g) = &c.geometry {
+        let i = y * w + x;
+        // Behind every surface around the pixel, or a background miss on a surface:
+        // hidden, whatever the neighbouring points say.
+        let hidden = if dc < f32::INFINITY { dc > g.far3[i] * (1.0 + GEOMETRY_CULL_RELATIVE) } else { g.inverse_depth[i] > 0.0 };
+        if hidden {
+            st[x] = STATUS_CULLED;
+            return false;
+        }
+    }
+    // Cheap pre-test: without any neighbour nearer by the threshold the point cannot be
+    // occluded (most pixels stop here).
+    let m = |row: usize| c.zmin_row[row * w + x];
+    let nearest = f32::from_bits(m(y.saturating_sub(1)).min(m(y)).min(m((y + 1).min(h - 1))));
+    if nearest * (1.0 + DEPTH_CULL_RELATIVE) < dc && is_occluded(c.zbuf, w, h, x, y, dc) {
+        st[x] = STATUS_CULLED;
+        return false;
+    }
+    pt[x] = key as u32;
+    dp[x] = dc;
+    true
+}
+
+/// The point image at pixel `x` of the row for its kept point `pt[x]`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn fill_pixel(c: &RowContext, x: usize, pt: &[u32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32], st: &mut [u8]) {
+    let i = pt[x] as usize;
+    let pr = c.proj[i];
+    sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
+    let sh = c.shade[i];
+    col[x] = sh.color;
+    let is_stale = c.flags[i] & FLAG_STALE != 0;
+    st[x] |= if is_stale { STATUS_STALE } else { 0 };
+    ag[x] = if is_stale { STALE_AGE } else { RenderCache::age_of(c.frame, sh.born) };
+    bo[x] = sh.born;
+}
+
+/// The point image at pixel `x` of the row without a point.
+#[inline(always)]
+fn clear_pixel(x: usize, sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) {
+    sp[x] = [0.0; 2];
+    col[x] = Vec3::ZERO;
+    ag[x] = f32::INFINITY;
+    bo[x] = 0;
 }

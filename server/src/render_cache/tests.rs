@@ -755,7 +755,7 @@ fn geometry_culls_hidden_points_and_misses_on_surfaces_wherever_they_land() {
         };
         c.insert(&at(s, (i % w as usize) as u32, (i / w as usize) as u32));
     }
-    let g = GeometryCull { far3: &far3, inverse_depth: &inverse_depth };
+    let g = GeometryCull { far3: &far3, inverse_depth: &inverse_depth, generation: 0 };
     c.reproject_points(&cam, Some(g), &mut StageTimes::new());
     let pi = c.point_image();
     for i in 0..n {
@@ -882,6 +882,24 @@ fn stale_points_give_way_to_newer_disagreeing_ones_of_the_same_surface_nearby() 
 
 #[test]
 fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
+    still_view_lockstep(false);
+}
+
+#[test]
+fn a_still_view_updating_its_point_image_in_place_equals_a_full_pass_with_geometry() {
+    still_view_lockstep(true);
+}
+
+/// Geometry cull images for the lockstep test: surfaces at random depths around the three
+/// layers, some pixels uncovered; `seed` changes them.
+fn random_geometry(n: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
+    let mut rng = Rng::new(seed);
+    let far3 = (0..n).map(|_| if rng.chance(0.2) { f32::INFINITY } else { 3.2 + rng.unit() * 1.6 }).collect();
+    let inverse_depth = (0..n).map(|_| if rng.chance(0.3) { 0.0 } else { 1.0 / (3.0 + rng.unit()) }).collect();
+    (far3, inverse_depth)
+}
+
+fn still_view_lockstep(with_geometry: bool) {
     // Two caches fed the same samples frame by frame; the second reprojects everything every
     // frame. Still frames (new points replacing old ones, nearest points among them), a
     // camera change, a moved object and removed objects in between: the depth buffers, the
@@ -892,6 +910,9 @@ fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
     let mut full = cache(w, h, 0.6);
     let mut cam = camera(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO, w, h);
     let mut still_frames = 0;
+    let mut in_place_frames = 0;
+    let mut geometry = random_geometry((w * h) as usize, 1);
+    let mut generation = 0;
     for f in 0..40 {
         if f == 15 {
             cam = camera(Vec3::new(0.8, 0.4, 4.5), Vec3::ZERO, w, h);
@@ -904,6 +925,16 @@ fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
         if f == 30 {
             inc.invalidate_objects(&[2]);
             full.invalidate_objects(&[2]);
+        }
+        if f == 34 {
+            // Points turning stale in a still view: the point image must show it.
+            let light = [LightBound { center: Vec3::new(0.0, 3.0, 0.0), radius: 0.5 }];
+            let region = (Vec3::splat(-0.5), Vec3::splat(0.5));
+            assert_eq!(inc.age_shadowed_by(region, &light), full.age_shadowed_by(region, &light));
+        }
+        if f == 37 {
+            inc.mark_stale();
+            full.mark_stale();
         }
         for _ in 0..rng.below(300) {
             let (x, y) = (rng.below(w as usize) as f32 + rng.unit(), rng.below(h as usize) as f32 + rng.unit());
@@ -919,12 +950,27 @@ fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
                 s
             };
             let s = at(s, x as u32, y as u32);
-            assert_eq!(inc.insert_aged(&s, false), full.insert_aged(&s, false));
+            let stale = rng.chance(0.05);
+            assert_eq!(inc.insert_aged(&s, stale), full.insert_aged(&s, stale));
         }
         full.reproject_all = true;
         still_frames += usize::from(!inc.reproject_all && inc.last_view.is_some());
-        frame(&mut inc, &cam);
-        frame(&mut full, &cam);
+        in_place_frames += usize::from(!inc.reproject_all && inc.last_view.is_some() && inc.point_image_from.is_some());
+        if f == 10 || f == 26 {
+            geometry = random_geometry((w * h) as usize, f as u64);
+            generation += 1;
+        }
+        let g = || with_geometry.then(|| GeometryCull { far3: &geometry.0, inverse_depth: &geometry.1, generation });
+        let step = |c: &mut RenderCache| {
+            let mut times = StageTimes::new();
+            let occluded = c.reproject_points(&cam, g(), &mut times);
+            let (with_point, filled, empty) = c.interpolate_gaps(&mut times);
+            FrameCounts { with_point, filled, empty, occluded, cache_points: c.valid as u32 }
+        };
+        let (a, b) = (step(&mut inc), step(&mut full));
+        assert_eq!(a, b, "frame {f}: counts");
+        assert_eq!(inc.stale_shown, full.stale_shown, "frame {f}: stale points shown");
+        assert_eq!(inc.status, full.status, "frame {f}: pass 2 outcomes");
         assert_eq!(inc.zbufs[0], full.zbufs[0], "frame {f}: depth buffer");
         for i in 0..inc.capacity {
             let (a, b) = (inc.proj[i], full.proj[i]);
@@ -934,7 +980,10 @@ fn a_still_view_reprojecting_only_new_points_equals_a_full_reprojection() {
         assert_eq!(a.point, b.point, "frame {f}");
         assert_eq!(a.born, b.born);
         assert_eq!(a.color, b.color);
+        assert_eq!(a.subpixel, b.subpixel);
+        assert_eq!(a.age.iter().map(|d| d.to_bits()).collect::<Vec<_>>(), b.age.iter().map(|d| d.to_bits()).collect::<Vec<_>>(), "frame {f}: ages");
         assert_eq!(a.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>(), b.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>());
     }
     assert!(still_frames >= 25, "most frames took the still-view path ({still_frames})");
+    assert!(in_place_frames >= 20, "most still frames updated the point image in place ({in_place_frames})");
 }

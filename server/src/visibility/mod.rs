@@ -73,6 +73,8 @@ pub struct Visibility {
     verts: Vec<Vert>,
     offsets: Vec<usize>,
     drawn: Option<DrawnFor>,
+    /// Draws so far: tells the Render Cache whether what it culls against changed.
+    draws: u64,
     /// Triangles drawn (not culled by the object test) and pixels covered in the last draw.
     triangles: u64,
     covered: u32,
@@ -102,6 +104,7 @@ impl Visibility {
             verts: Vec::new(),
             offsets: Vec::new(),
             drawn: None,
+            draws: 0,
             triangles: 0,
             covered: 0,
         }
@@ -129,6 +132,7 @@ impl Visibility {
         let redrawn = self.drawn.as_ref() != Some(&key);
         if redrawn {
             self.draw(scene, transforms, cam);
+            self.draws += 1;
             self.covered = self.invz.par_iter().with_min_len(16 * 1024).filter(|&&v| v > 0.0).count() as u32;
             self.drawn = Some(key);
         }
@@ -165,7 +169,7 @@ impl Visibility {
 
     /// What the Render Cache's reprojection culls against.
     pub fn cull(&self) -> crate::render_cache::GeometryCull<'_> {
-        crate::render_cache::GeometryCull { far3: &self.far3, inverse_depth: &self.invz }
+        crate::render_cache::GeometryCull { far3: &self.far3, inverse_depth: &self.invz, generation: self.draws }
     }
 
     /// Per pixel, the farthest surface depth over its 3x3 neighbourhood (`INFINITY` where
