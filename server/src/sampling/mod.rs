@@ -105,6 +105,13 @@ pub struct Sampler {
     /// Per row: the sum of its priorities (summed in row order into the frame's total, so
     /// the total does not depend on how the rows were split among threads).
     row_sums: Vec<f64>,
+    /// Working buffers of the bands of rows dithered in parallel.
+    bands: Vec<DitherBand>,
+}
+
+/// One band of rows of the dithering, with its own buffers and picks.
+#[derive(Default)]
+struct DitherBand {
     /// Diffused error of the current and the next row (one guard cell each side).
     err_cur: Vec<f32>,
     err_next: Vec<f32>,
@@ -112,7 +119,25 @@ pub struct Sampler {
     /// priority plus the error diffused into it from the row before.
     row_q: Vec<f32>,
     row_a: Vec<f32>,
+    picks: Vec<PixelRequest>,
 }
+
+impl DitherBand {
+    fn new(w: usize) -> Self {
+        DitherBand { err_cur: vec![0.0; w + 2], err_next: vec![0.0; w + 2], row_q: vec![0.0; w], row_a: vec![0.0; w], picks: Vec::new() }
+    }
+}
+
+/// Logical rows per band of the dithering. The error diffusion is serial along a band (a
+/// chain of dependent additions per pixel: 8 ns a pixel, 2 ms for a 512² frame), so bands
+/// run in parallel.
+pub const DITHER_BAND_ROWS: usize = 64;
+/// Rows of the band before that a band dithers first without keeping their picks. Started
+/// from zero error, a band's first rows pick too often where priorities are low: the
+/// steady-state error there is negative (each pick leaves about -1 behind), and a zero
+/// start drops that debt — about one extra pick per 20 pixels of a sparse row per band.
+/// A few rows bring the error field to its steady state (its memory is short).
+pub const DITHER_WARM_UP_ROWS: usize = 8;
 
 use crate::rng::mix64;
 
@@ -138,7 +163,11 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 impl Sampler {
     /// Bytes [`Self::new`] allocates for a `width` × `height` image.
     pub fn bytes_for(width: u32, height: u32) -> usize {
-        4 * width as usize * height as usize + 8 * height as usize + 2 * 4 * (width as usize + 2) + 2 * 4 * width as usize
+        let (w, n) = (width as usize, width as usize * height as usize);
+        let bands = (height as usize).div_ceil(DITHER_BAND_ROWS);
+        // Priorities and row sums; per band its rows' buffers; the bands' picks, at most
+        // one per pixel.
+        4 * n + 8 * height as usize + bands * (2 * 4 * (w + 2) + 2 * 4 * w) + std::mem::size_of::<PixelRequest>() * n
     }
 
     pub fn new(width: u32, height: u32, seed: u64) -> Self {
@@ -150,10 +179,7 @@ impl Sampler {
             frame: 0,
             prio: vec![0.0; n],
             row_sums: vec![0.0; height as usize],
-            err_cur: vec![0.0; width as usize + 2],
-            err_next: vec![0.0; width as usize + 2],
-            row_q: vec![0.0; width as usize],
-            row_a: vec![0.0; width as usize],
+            bands: (0..(height as usize).div_ceil(DITHER_BAND_ROWS)).map(|_| DitherBand::new(width as usize)).collect(),
         }
     }
 
@@ -256,8 +282,9 @@ impl Sampler {
         s as f32
     }
 
-    /// Serpentine Floyd–Steinberg over the priorities times `scale` (capped at 1); stops at
-    /// `budget` picks.
+    /// Serpentine Floyd–Steinberg over the priorities times `scale` (capped at 1), in bands
+    /// of [`DITHER_BAND_ROWS`] rows in parallel (each warmed up on the rows before it); the
+    /// picks in band order, cut at `budget`.
     ///
     /// Per frame, the scan runs over the image shifted cyclically by a random offset, starts
     /// in alternating directions and uses hashed thresholds, so equal-priority pixels are not
@@ -267,46 +294,71 @@ impl Sampler {
         let frame_key = mix64(self.seed ^ mix64(frame));
         let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
         let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
-        self.err_cur.iter_mut().for_each(|e| *e = 0.0);
-        self.err_next.iter_mut().for_each(|e| *e = 0.0);
         let flip = frame & 1 == 1;
-        // Thresholds from one xorshift64* stream per frame (cheaper than a hash per pixel).
-        let mut rng = frame_key | 1;
-        for ly in 0..h {
-            let y = (ly + oy) % h;
-            let left_to_right = (ly % 2 == 0) != flip;
-            // The row in scan order (logical column lx is physical column (lx + ox) % w),
-            // scaled and capped, plus the error diffused into it: straight loops off the
-            // scan's critical path.
-            let row = &self.prio[y * w..(y + 1) * w];
-            let (head, tail) = self.row_q.split_at_mut(w - ox);
-            for (q, &p) in head.iter_mut().zip(&row[ox..]) {
-                *q = (p * scale).min(1.0);
+        let prio = &self.prio;
+        self.bands.par_iter_mut().enumerate().for_each(|(b, band)| {
+            band.picks.clear();
+            band.err_cur.iter_mut().for_each(|e| *e = 0.0);
+            band.err_next.iter_mut().for_each(|e| *e = 0.0);
+            // Thresholds from one xorshift64* stream per band and frame (cheaper than a
+            // hash per pixel).
+            let mut rng = band_stream(frame_key, b);
+            let first = b * DITHER_BAND_ROWS;
+            for ly in first.saturating_sub(DITHER_WARM_UP_ROWS)..((b + 1) * DITHER_BAND_ROWS).min(h) {
+                if ly == first {
+                    band.picks.clear();
+                }
+                let y = (ly + oy) % h;
+                let left_to_right = (ly % 2 == 0) != flip;
+                // The row in scan order (logical column lx is physical column (lx + ox) % w),
+                // scaled and capped, plus the error diffused into it: straight loops off the
+                // scan's critical path.
+                let row = &prio[y * w..(y + 1) * w];
+                let (head, tail) = band.row_q.split_at_mut(w - ox);
+                for (q, &p) in head.iter_mut().zip(&row[ox..]) {
+                    *q = (p * scale).min(1.0);
+                }
+                for (q, &p) in tail.iter_mut().zip(&row[..ox]) {
+                    *q = (p * scale).min(1.0);
+                }
+                for ((a, &q), &c) in band.row_a.iter_mut().zip(&band.row_q).zip(&band.err_cur[1..]) {
+                    *a = q + c;
+                }
+                // Warm-up rows never end the band: their picks are not kept.
+                let budget = if ly < first { usize::MAX } else { budget };
+                let mut scan = RowScan { q: &band.row_q, a: &band.row_a, y, ox, next: &mut band.err_next, rng: &mut rng, budget, out: &mut band.picks };
+                let (done, carry) = if left_to_right { scan.run::<true>() } else { scan.run::<false>() };
+                if done {
+                    return;
+                }
+                // Fold the error pushed past the row's ends back into the image instead of
+                // losing it: at sparse priorities the lost error would cost a good part of
+                // the budget. The row ended at the right edge when scanning left-to-right.
+                let next = &mut band.err_next;
+                let end_cell = if left_to_right { w } else { 1 };
+                next[end_cell] += carry;
+                next[1] += next[0];
+                next[w] += next[w + 1];
+                next[0] = 0.0;
+                next[w + 1] = 0.0;
+                // The scan writes every cell of the next row's buffer, so it needs no clearing.
+                std::mem::swap(&mut band.err_cur, &mut band.err_next);
             }
-            for (q, &p) in tail.iter_mut().zip(&row[..ox]) {
-                *q = (p * scale).min(1.0);
+        });
+        for band in &self.bands {
+            let take = (budget - out.len()).min(band.picks.len());
+            out.extend_from_slice(&band.picks[..take]);
+            if out.len() == budget {
+                break;
             }
-            for ((a, &q), &c) in self.row_a.iter_mut().zip(&self.row_q).zip(&self.err_cur[1..]) {
-                *a = q + c;
-            }
-            let mut scan = RowScan { q: &self.row_q, a: &self.row_a, y, ox, next: &mut self.err_next, rng: &mut rng, budget, out };
-            let (done, carry) = if left_to_right { scan.run::<true>() } else { scan.run::<false>() };
-            if done {
-                return;
-            }
-            // Fold the error pushed past the row's ends back into the image instead of
-            // losing it: at sparse priorities the lost error would cost a good part of the
-            // budget. The row ended at the right edge when scanning left-to-right.
-            let end_cell = if left_to_right { w } else { 1 };
-            self.err_next[end_cell] += carry;
-            self.err_next[1] += self.err_next[0];
-            self.err_next[w] += self.err_next[w + 1];
-            self.err_next[0] = 0.0;
-            self.err_next[w + 1] = 0.0;
-            // The scan writes every cell of the next row's buffer, so it needs no clearing.
-            std::mem::swap(&mut self.err_cur, &mut self.err_next);
         }
     }
+}
+
+/// The xorshift64* state of band `b`'s thresholds in the frame of `frame_key` (never zero).
+#[inline]
+fn band_stream(frame_key: u64, b: usize) -> u64 {
+    mix64(frame_key ^ (3 + b as u64)) | 1
 }
 
 /// One row of the serpentine error diffusion, over the row in scan order. The next row's

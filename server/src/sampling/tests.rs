@@ -221,49 +221,59 @@ fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages
     let frame_key = mix64(seed ^ mix64(frame));
     let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
     let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
-    let mut cur = vec![0.0f32; w + 2];
     let flip = frame & 1 == 1;
-    let mut rng = frame_key | 1;
-    for ly in 0..h {
-        let y = (ly + oy) % h;
-        let ltr = (ly % 2 == 0) != flip;
-        let row = &s.prio[y * w..(y + 1) * w];
-        let mut next = vec![0.0f32; w + 2];
-        let mut x = if ltr { ox } else { (ox + w - 1) % w };
-        let mut carry = 0.0f32;
-        for step in 0..w {
-            let lx = if ltr { step } else { w - 1 - step };
-            let q = (row[x] * scale).min(1.0);
-            let v = q + cur[lx + 1] + carry;
-            rng ^= rng >> 12;
-            rng ^= rng << 25;
-            rng ^= rng >> 27;
-            let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
-            let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
-            let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
-                let h2 = mix64(hsh);
-                out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)) });
-                if out.len() == budget {
-                    return out;
-                }
-                v - 1.0
-            } else {
-                v
-            };
-            carry = e * (7.0 / 16.0);
-            let (ahead, behind) = if ltr { (lx + 2, lx) } else { (lx, lx + 2) };
-            next[behind] += e * (3.0 / 16.0);
-            next[lx + 1] += e * (5.0 / 16.0);
-            next[ahead] += e * (1.0 / 16.0);
-            x = if ltr { (x + 1) % w } else { (x + w - 1) % w };
+    // Bands of rows, each from zero error with its own stream, warmed up on the rows before
+    // it (their picks dropped), its picks after the band before's, cut at the budget.
+    for first in (0..h).step_by(DITHER_BAND_ROWS) {
+        let mut cur = vec![0.0f32; w + 2];
+        let mut rng = band_stream(frame_key, first / DITHER_BAND_ROWS);
+        let mut band_out = Vec::new();
+        'rows: for ly in first.saturating_sub(DITHER_WARM_UP_ROWS)..(first + DITHER_BAND_ROWS).min(h) {
+            if ly == first {
+                band_out.clear();
+            }
+            let y = (ly + oy) % h;
+            let ltr = (ly % 2 == 0) != flip;
+            let row = &s.prio[y * w..(y + 1) * w];
+            let mut next = vec![0.0f32; w + 2];
+            let mut x = if ltr { ox } else { (ox + w - 1) % w };
+            let mut carry = 0.0f32;
+            for step in 0..w {
+                let lx = if ltr { step } else { w - 1 - step };
+                let q = (row[x] * scale).min(1.0);
+                let v = q + cur[lx + 1] + carry;
+                rng ^= rng >> 12;
+                rng ^= rng << 25;
+                rng ^= rng >> 27;
+                let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
+                let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
+                let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
+                    let h2 = mix64(hsh);
+                    band_out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)) });
+                    if ly >= first && band_out.len() == budget {
+                        break 'rows;
+                    }
+                    v - 1.0
+                } else {
+                    v
+                };
+                carry = e * (7.0 / 16.0);
+                let (ahead, behind) = if ltr { (lx + 2, lx) } else { (lx, lx + 2) };
+                next[behind] += e * (3.0 / 16.0);
+                next[lx + 1] += e * (5.0 / 16.0);
+                next[ahead] += e * (1.0 / 16.0);
+                x = if ltr { (x + 1) % w } else { (x + w - 1) % w };
+            }
+            next[if ltr { w } else { 1 }] += carry;
+            next[1] += next[0];
+            next[w] += next[w + 1];
+            next[0] = 0.0;
+            next[w + 1] = 0.0;
+            cur = next;
         }
-        next[if ltr { w } else { 1 }] += carry;
-        next[1] += next[0];
-        next[w] += next[w + 1];
-        next[0] = 0.0;
-        next[w + 1] = 0.0;
-        cur = next;
+        out.append(&mut band_out);
     }
+    out.truncate(budget);
     out
 }
 
