@@ -680,9 +680,12 @@ impl RenderCache {
     /// Age in frames of a point shaded at frame `born`.
     #[inline]
     pub(crate) fn age_of(frame: u32, born: u32) -> f32 {
-        // Through i64: one conversion instruction (u32 to f32 is emulated on x86-64).
-        let a = i64::from(frame.wrapping_sub(born)) as f32;
-        if a < STALE_AGE {
+        // Through i32, which converts to f32 four or eight at a time (u32 to f32 is emulated
+        // on x86-64, i64 to f32 is one at a time): differences of 2^31 and more are negative
+        // there, and older than STALE_AGE anyway.
+        let d = frame.wrapping_sub(born) as i32;
+        let a = d as f32;
+        if d >= 0 && a < STALE_AGE {
             a
         } else {
             STALE_AGE

@@ -987,3 +987,21 @@ fn still_view_lockstep(with_geometry: bool) {
     assert!(still_frames >= 25, "most frames took the still-view path ({still_frames})");
     assert!(in_place_frames >= 20, "most still frames updated the point image in place ({in_place_frames})");
 }
+
+#[test]
+fn ages_equal_the_wide_conversion() {
+    // The oracle: the difference as a 64-bit integer to f32, capped at STALE_AGE.
+    let oracle = |frame: u32, born: u32| (i64::from(frame.wrapping_sub(born)) as f32).min(STALE_AGE);
+    let mut rng = Rng::new(5);
+    let edges = [0u32, 1, 1 << 24, (1 << 24) + 1, 999_999_999, 1_000_000_000, 1_000_000_064, (1 << 31) - 1, 1 << 31, u32::MAX];
+    for &d in &edges {
+        for born in [0u32, 7, u32::MAX - 3] {
+            let frame = born.wrapping_add(d);
+            assert_eq!(RenderCache::age_of(frame, born).to_bits(), oracle(frame, born).to_bits(), "difference {d}");
+        }
+    }
+    for _ in 0..100_000 {
+        let (frame, born) = (rng.next_u64() as u32, rng.next_u64() as u32);
+        assert_eq!(RenderCache::age_of(frame, born).to_bits(), oracle(frame, born).to_bits());
+    }
+}
