@@ -41,7 +41,7 @@ pub fn light_pdf(a: &AreaLight, d2: f32, cos_l: f32) -> f32 {
 /// light). Möller–Trumbore on the light's fan triangles.
 fn hit_area_light(a: &AreaLight, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
     let cos_l = -a.normal.dot(dir);
-    if !(cos_l > 0.0) {
+    if cos_l.is_nan() || cos_l <= 0.0 {
         return None;
     }
     for [p0, p1, p2] in &a.tris {

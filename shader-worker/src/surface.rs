@@ -33,7 +33,7 @@ pub fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
     let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
     let (d20, d21) = (e2.dot(e0), e2.dot(e1));
     let den = d00 * d11 - d01 * d01;
-    if !(den.abs() > 0.0) {
+    if den.is_nan() || den == 0.0 {
         return Vec3::new(1.0, 0.0, 0.0);
     }
     let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
