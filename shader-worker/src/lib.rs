@@ -1,6 +1,7 @@
 //! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
 //! ray requests ([`shade`]) and serves them over gRPC ([`service`]), with its command line in
 //! [`cli`] and its Prometheus metrics in [`metrics`].
+pub mod baseline;
 pub mod bsdf_rays;
 pub mod bvh;
 pub mod cli;

@@ -113,6 +113,12 @@ pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, see
     let ShaderSpec::Direct(params) = spec;
     let per: Vec<(SampleOut, Vec<[u32; 3]>, bool)> =
         requests.par_iter().map(|r| shade_direct(scene, inst, params, seed, r)).collect();
+    merge(per)
+}
+
+/// One batch's output from its per-request results (sample, triples, non-finite flag):
+/// triples and visible objects deduplicated and sorted.
+pub(crate) fn merge(per: Vec<(SampleOut, Vec<[u32; 3]>, bool)>) -> ShadeOutput {
     let mut triples = HashSet::new();
     let mut visible = HashSet::new();
     let mut nonfinite = 0;
