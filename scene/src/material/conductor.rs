@@ -109,3 +109,22 @@ impl Scatter for Conductor {
         Vec3::ZERO
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eta_from_f0_reproduces_f0_at_normal_incidence() {
+        for f0 in [Vec3::new(0.04, 0.5, 0.95), Vec3::new(1.0, 0.0, 0.2)] {
+            let eta = eta_from_f0(f0);
+            let f = fresnel::conductor(1.0, eta, Vec3::ZERO);
+            // F0 = 1 is clamped to 0.999 (an infinite index is no use).
+            assert!((f - f0.min(Vec3::splat(0.999))).abs().max_element() < 1e-4, "{f} vs {f0}");
+            assert!(eta.is_finite());
+        }
+        // The model is Mitsuba's and pbrt's: grazing light is reflected whole.
+        let m = Conductor::new(eta_from_f0(Vec3::splat(0.5)), Vec3::ZERO, 0.0, Vec3::ONE);
+        assert!((m.fresnel(0.0) - Vec3::ONE).abs().max_element() < 1e-5);
+    }
+}
