@@ -20,6 +20,8 @@
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
 //! - `encode`: the frame's conversion to sRGB, QOI / raw encoding and publishing, against
 //!   the encoder before (kept in the bench as the baseline), one thread and all.
+//! - `materials`: ns per `eval` / `sample` / `pdf` call of each scattering model, and the
+//!   `direct` shader's samples/s against the shader before materials, in the same process.
 //! - `fuzz`: the scene-parser fuzz harness for as long as asked (findings go to the crash
 //!   corpus the tests replay).
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
@@ -37,6 +39,7 @@ mod frame;
 mod fuzz;
 mod inprocess;
 mod load;
+mod materials;
 mod motion;
 mod loadtest;
 mod quality;
@@ -79,6 +82,9 @@ enum Cmd {
     /// Quality in motion: a session along an orbit, dolly, object slide or camera path,
     /// every frame against the converged reference of its exact state.
     Motion(motion::MotionArgs),
+    /// Scattering models' ns per eval/sample/pdf call, and the direct shader's samples/s
+    /// against the shader before materials, in this process.
+    Materials(materials::MaterialsArgs),
     /// Frame encoding (sRGB, QOI, raw) and publishing against the previous encoder.
     Encode(encode::EncodeArgs),
     /// Fuzz the scene parsers: mutated seed inputs; panics, slow parses and out-of-proportion
@@ -99,6 +105,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
         Cmd::Encode(a) => encode::run(a),
+        Cmd::Materials(a) => materials::run(a),
         Cmd::Edges(a) => edges::run(a),
         Cmd::Motion(a) => motion::run(a),
         Cmd::Fuzz(a) => fuzz::run(a),

@@ -71,6 +71,7 @@ fn procedural_builtins_orbit_inside_their_rooms_and_outside_every_object() {
         ("chains", false, &["chain1-link3", "chain2-link4", "chain0-link4", "chain3-link3"][..]),
         ("torus-capsule", false, &["torus", "capsule"][..]),
         ("rooms", true, &["table0", "ball0"][..]),
+        ("materials", false, &["lambert", "roughglass"][..]),
     ] {
         let s = builtin::load(name).unwrap();
         assert!(s.orbit.is_some(), "{name} suggests no orbit of its own");

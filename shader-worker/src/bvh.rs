@@ -179,6 +179,13 @@ impl Instances {
         Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, local, normal: normal.into(), local_normal: local_normal.into() })
     }
 
+    /// The matrix taking object `object`'s normals to world space (the inverse transpose of
+    /// its linear part; the result needs normalising).
+    #[inline]
+    pub fn normal_to_world(&self, object: u32) -> Mat3A {
+        self.normal_to_world[object as usize]
+    }
+
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.
     pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
         let top = self.top.as_ref()?;

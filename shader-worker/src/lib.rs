@@ -1,13 +1,18 @@
 //! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
 //! ray requests ([`shade`]) and serves them over gRPC ([`service`]), with its command line in
 //! [`cli`] and its Prometheus metrics in [`metrics`].
+pub mod baseline;
+pub mod bsdf_rays;
 pub mod bvh;
 pub mod cli;
+#[cfg(test)]
+mod lambert_oracle;
 pub mod loaded;
 pub mod metrics;
 mod rng;
 pub mod service;
 pub mod shade;
+pub mod surface;
 pub mod triples;
 
 pub use bvh::{Hit, Instances, SceneBvh};

@@ -1,16 +1,22 @@
 //! Shaders. `direct` (paper 000 §7: "direct illumination with ambient"): point lights with one
-//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows), a
-//! Lambertian BRDF, emission of light fixtures seen from the front, and an ambient term.
+//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows), the
+//! material's BSDF ([`crate::surface`]: shading normals, textures, sidedness), emission of
+//! light fixtures seen from the front, and an ambient term times the diffuse albedo. Rough
+//! lobes also sample the BSDF toward area lights (multiple importance sampling) and delta
+//! lobes see area lights only that way ([`crate::bsdf_rays`]); point lights reach every
+//! non-delta lobe. Transmission receives no direct light (a light behind a glass surface is
+//! behind the object the surface belongs to).
 //! Every blocked shadow ray reports a light–blocker–receiver triple (paper 000 §6.5 "Finding
 //! light-blocker-receiver triples"): the renderer's edge finder learns from them which
 //! shadows exist without testing every light–blocker pair.
+use crate::bsdf_rays::{area_light_via_bsdf, light_pdf, power_heuristic};
 use crate::bvh::Instances;
 use crate::loaded::{LoadedScene, PreparedLight};
 use crate::rng::Rng;
+use crate::surface::ShadingPoint;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
-use std::f32::consts::FRAC_1_PI;
 
 /// Names of the shaders this worker offers: every row of the shared table
 /// ([`edgepoint_proto::shaders::SHADERS`]).
@@ -107,6 +113,12 @@ pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, see
     let ShaderSpec::Direct(params) = spec;
     let per: Vec<(SampleOut, Vec<[u32; 3]>, bool)> =
         requests.par_iter().map(|r| shade_direct(scene, inst, params, seed, r)).collect();
+    merge(per)
+}
+
+/// One batch's output from its per-request results (sample, triples, non-finite flag):
+/// triples and visible objects deduplicated and sorted.
+pub(crate) fn merge(per: Vec<(SampleOut, Vec<[u32; 3]>, bool)>) -> ShadeOutput {
     let mut triples = HashSet::new();
     let mut visible = HashSet::new();
     let mut nonfinite = 0;
@@ -125,6 +137,10 @@ pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, see
     visible.sort_unstable();
     ShadeOutput { samples, triples, visible, nonfinite }
 }
+
+/// Seed offset of the BSDF samples' random stream: separate from the light samples' stream,
+/// so the light samples (and the triples they find) do not depend on the material.
+const BSDF_STREAM: u64 = 0x6273_6466_5f72_6179;
 
 fn shade_direct(
     scene: &LoadedScene,
@@ -151,7 +167,11 @@ fn shade_direct(
     if front {
         rgb += mat.emission;
     }
-    let albedo = mat.diffuse;
+    let sp = ShadingPoint::new(mat, &obj.mesh, inst, &h, d, front);
+    // Light samples reach the non-delta part; a pure mirror or smooth glass gets nothing from
+    // them (its shadow rays are still cast: the triples describe geometry, not materials).
+    let lit = sp.scatters && sp.bsdf_has_non_delta();
+    let glossy = sp.is_glossy();
     let eps = scene.epsilon;
     let origin = h.position + n * eps;
     let mut rng = Rng::new(seed, r.id);
@@ -169,7 +189,11 @@ fn shade_direct(
                 }
                 match inst.occluded(&scene.bvh, origin, wi, 0.0, dist * (1.0 - 1e-4)) {
                     Some(b) => push_unique(&mut triples, [li, b, h.object]),
-                    None => rgb += albedo * FRAC_1_PI * *intensity * (cos / d2),
+                    None if !lit => {}
+                    None => match sp.constant {
+                        Some(f) => rgb += f * *intensity * (cos / d2),
+                        None => rgb += sp.eval_cos(wi) * *intensity / d2,
+                    },
                 }
             }
             PreparedLight::Area(a) => {
@@ -183,7 +207,10 @@ fn shade_direct(
                 let ny = k.div_ceil(nx);
                 let cells = nx * ny;
                 let rot = (rng.next_u64() % cells as u64) as u32;
-                let mut sum = Vec3::ZERO;
+                // `sum`: unweighted radiance × geometry, for a BSDF constant over the
+                // hemisphere (multiplied once below, as before materials); `weighted`: the
+                // BSDF applied per sample, with the MIS weight for rough lobes.
+                let (mut sum, mut weighted) = (Vec3::ZERO, Vec3::ZERO);
                 for i in 0..k {
                     let c = (i + rot) % cells;
                     let u = ((c % nx) as f32 + rng.next_f32()) / nx as f32;
@@ -200,14 +227,28 @@ fn shade_direct(
                     }
                     match inst.occluded(&scene.bvh, origin, wi, 0.0, dist * (1.0 - 1e-4)) {
                         Some(b) => push_unique(&mut triples, [li, b, h.object]),
-                        None => sum += a.radiance * (cos_x * cos_l / d2),
+                        None if !lit => {}
+                        None if sp.constant.is_some() => sum += a.radiance * (cos_x * cos_l / d2),
+                        None => {
+                            let w = if glossy { power_heuristic(light_pdf(a, d2, cos_l), sp.pdf(wi)) } else { 1.0 };
+                            weighted += sp.eval_cos(wi) * a.radiance * (w * cos_l / d2);
+                        }
                     }
                 }
-                rgb += albedo * FRAC_1_PI * sum * (a.area / k as f32);
+                if let Some(f) = sp.constant {
+                    rgb += f * sum * (a.area / k as f32);
+                }
+                rgb += weighted * (a.area / k as f32);
             }
         }
     }
-    rgb += albedo * s.ambient * p.ambient;
+    if sp.scatters {
+        if sp.bsdf_has_delta() || glossy {
+            let mut bsdf_rng = Rng::new(seed ^ BSDF_STREAM, r.id);
+            rgb += area_light_via_bsdf(scene, inst, &sp, origin, n, p.shadow_rays, &mut bsdf_rng);
+        }
+        rgb += sp.diffuse_albedo() * s.ambient * p.ambient;
+    }
     let bad = !rgb.is_finite();
     if bad {
         rgb = Vec3::ZERO;
@@ -217,7 +258,7 @@ fn shade_direct(
     (SampleOut { id: r.id, hit: Some(hit), rgb }, triples, bad)
 }
 
-fn push_unique(v: &mut Vec<[u32; 3]>, t: [u32; 3]) {
+pub(crate) fn push_unique(v: &mut Vec<[u32; 3]>, t: [u32; 3]) {
     if !v.contains(&t) {
         v.push(t);
     }

@@ -93,7 +93,7 @@ struct Args {
     cluster_log_file: Option<PathBuf>,
 
     /// Scene to render: a built-in name (cornell, cornell-point, chains, torus-capsule,
-    /// grid-dragon, rooms) or a .ply / .obj file (an OBJ's mtllib files are sent along from
+    /// grid-dragon, rooms, materials) or a .ply / .obj file (an OBJ's mtllib files are sent along from
     /// its directory).
     #[arg(long, value_name = "NAME|PATH", default_value = "cornell")]
     scene: String,

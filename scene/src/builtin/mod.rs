@@ -1,5 +1,6 @@
 //! Built-in scenes: the Cornell box, and scenes after paper 000's (§7.1, Figures 7, 9, 12,
-//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`.
+//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`; and `materials`, the demo of the
+//! scattering models.
 //!
 //! Most are procedural. `grid-dragon` is built around the shared Stanford dragon, which is
 //! data, not code: such a built-in names its data files ([`data_files`]) and is built by
@@ -11,6 +12,7 @@
 mod chains;
 mod cornell;
 mod grid_dragon;
+mod materials;
 mod rooms;
 pub mod shapes;
 mod torus_capsule;
@@ -28,6 +30,7 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("torus-capsule", "a torus resting on a capsule under a square area light: contact hardening (paper Fig. 9)"),
     ("grid-dragon", "a grid casting a shadow pattern on the Stanford dragon, point light (paper Fig. 13; needs dragon/dragon_vrip.ply)"),
     ("rooms", "six furnished rooms with doorways, one ceiling area light each (paper Fig. 12)"),
+    ("materials", "a sphere of each material (Lambert, plastic, metal, glass; smooth and rough) under an area and a point light"),
 ];
 
 /// Data files (paths under the shared data directory) a built-in is made from.
@@ -50,6 +53,7 @@ pub fn load(name: &str) -> Result<Scene, String> {
         "chains" => Ok(chains::chains()),
         "torus-capsule" => Ok(torus_capsule::torus_capsule()),
         "rooms" => Ok(rooms::rooms()),
+        "materials" => Ok(materials::materials()),
         _ if BUILTINS.iter().any(|b| b.0 == name) => Err(format!(
             "built-in scene '{name}' is made from the data file(s) {} and must be loaded with them: \
              the viewer and the bench find them in the shared data directory (--data-dir, the {} \
