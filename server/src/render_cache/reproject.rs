@@ -284,18 +284,7 @@ impl RenderCache {
             }
         }
         self.changed.clear();
-        let pool = &self.pool;
-        let ctx = RowContext {
-            zbuf: &self.zbufs[0],
-            zmin_row: &self.zmin_row,
-            proj: &self.proj,
-            shade: &pool.shade,
-            flags: &pool.flags,
-            frame: self.frame,
-            w,
-            h,
-            geometry,
-        };
+        let ctx = RowContext::new(&self.zbufs[0], &self.zmin_row, &self.proj, &self.pool, self.frame, w, h, geometry);
         let pi = &mut self.points;
         let frame = self.frame;
         let (dc, ds) = (
@@ -352,18 +341,7 @@ impl RenderCache {
     /// image. Returns the number of culled points; counts the stale points shown.
     fn build_point_image(&mut self, geometry: Option<GeometryCull>) -> u32 {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
-        let pool = &self.pool;
-        let ctx = RowContext {
-            zbuf: &self.zbufs[0],
-            zmin_row: &self.zmin_row,
-            proj: &self.proj,
-            shade: &pool.shade,
-            flags: &pool.flags,
-            frame: self.frame,
-            w,
-            h,
-            geometry,
-        };
+        let ctx = RowContext::new(&self.zbufs[0], &self.zmin_row, &self.proj, &self.pool, self.frame, w, h, geometry);
         let pi = &mut self.points;
         let counts = (
             pi.point.par_chunks_mut(w),
@@ -507,6 +485,13 @@ struct RowContext<'a> {
     w: usize,
     h: usize,
     geometry: Option<GeometryCull<'a>>,
+}
+
+impl<'a> RowContext<'a> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(zbuf: &'a [u64], zmin_row: &'a [u32], proj: &'a [Projected], pool: &'a super::Pool, frame: u32, w: usize, h: usize, geometry: Option<GeometryCull<'a>>) -> Self {
+        RowContext { zbuf, zmin_row, proj, shade: &pool.shade, flags: &pool.flags, frame, w, h, geometry }
+    }
 }
 
 /// Pass 2 for row `y`: culls occluded points and writes the row of the point image and of
