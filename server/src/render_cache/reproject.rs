@@ -240,8 +240,9 @@ impl RenderCache {
             for &p in &self.changed {
                 let (y, x) = (p as usize / w, p as usize % w);
                 let (zrow, mrow) = (&z0[y * w..(y + 1) * w], &mut self.zmin_row[y * w..(y + 1) * w]);
-                for x in x.saturating_sub(1)..(x + 2).min(w) {
-                    mrow[x] = row_min(zrow, x);
+                let x0 = x.saturating_sub(1);
+                for (k, m) in mrow[x0..(x + 2).min(w)].iter_mut().enumerate() {
+                    *m = row_min(zrow, x0 + k);
                 }
             }
         } else {
