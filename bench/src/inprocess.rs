@@ -16,7 +16,8 @@ use edgepoint_scene::Progress;
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
 use glam::Vec3;
 use std::collections::HashMap;
-use std::path::Path;
+use edgepoint_viewer::headless::FileFormat;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// A scene loaded for in-process shading.
@@ -256,6 +257,29 @@ pub fn reconstructed_frame(staged: &Staged, cam: &CameraFrame, samples: &[Sample
 }
 
 /// Writes a linear-RGB image as an sRGB PNG.
+/// Writes linear pixels as `stem.png` (8-bit sRGB, clipped) or `stem.exr` (linear RGB
+/// float, as rendered: references are ground truth, so no bit is dropped); returns the path.
+pub fn write_image(stem: &Path, format: FileFormat, w: u32, h: u32, linear: &[Vec3]) -> Result<PathBuf> {
+    // Appended, not `with_extension`: stems like `epr_05.0` hold a dot.
+    let with = |ext: &str| {
+        let mut p = stem.as_os_str().to_owned();
+        p.push(ext);
+        PathBuf::from(p)
+    };
+    match format {
+        FileFormat::Png => {
+            let path = with(".png");
+            write_png(&path, w, h, linear)?;
+            Ok(path)
+        }
+        FileFormat::Exr => {
+            let path = with(".exr");
+            edgepoint_viewer::exr_file::write_f32(&path, w, h, linear)?;
+            Ok(path)
+        }
+    }
+}
+
 pub fn write_png(path: &Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
     let mut bytes = Vec::with_capacity(linear.len() * 3);
     for c in linear {

@@ -8,6 +8,7 @@
 //! each lossless method on a real frame).
 use anyhow::{bail, Context, Result};
 use edgepoint_proto::linear_frame::LinearFrame;
+pub use exr::compression::Compression;
 use exr::prelude::*;
 use half::f16;
 use std::path::Path;
