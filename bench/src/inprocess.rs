@@ -287,3 +287,22 @@ pub fn write_png(path: &Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
     }
     image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgb8).with_context(|| format!("writing {}", path.display()))
 }
+
+#[cfg(test)]
+mod write_image_tests {
+    use super::*;
+
+    #[test]
+    fn images_keep_dotted_stems_and_exr_keeps_the_linear_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let px = vec![Vec3::new(0.25, 3.5, 1e-4), Vec3::new(12.0, 0.0, 0.5)];
+        let png = write_image(&dir.path().join("epr_05.0"), FileFormat::Png, 2, 1, &px).unwrap();
+        assert_eq!(png.file_name().unwrap(), "epr_05.0.png");
+        assert_eq!(image::open(&png).unwrap().to_rgb8().get_pixel(0, 0).0[1], 255, "PNG clips");
+        let exr = write_image(&dir.path().join("epr_05.0"), FileFormat::Exr, 2, 1, &px).unwrap();
+        assert_eq!(exr.file_name().unwrap(), "epr_05.0.exr");
+        let (w, h, v) = edgepoint_viewer::exr_file::read_rgb(&exr).unwrap();
+        assert_eq!((w, h), (2, 1));
+        assert_eq!(v, vec![0.25, 3.5, 1e-4, 12.0, 0.0, 0.5], "EXR keeps every f32, past 1 too");
+    }
+}
