@@ -85,7 +85,8 @@ pub struct FrameArgs {
     /// Skip the reference renders (no PSNR, no speedup).
     #[arg(long)]
     pub no_reference: bool,
-    /// Write the last frame and the references as PNG files into this directory.
+    /// Write the last frame and the references as PNG (or, with --format exr, EXR) files into
+    /// this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// File format of the images --out writes: png (8-bit sRGB, clipped) or exr (linear RGB

@@ -57,7 +57,7 @@ pub struct QualityArgs {
     #[arg(long = "shader-param", value_parser = crate::frame::parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Write the reference, both reconstructions and the EPI class overlay of every density
-    /// as PNG files into DIR/<scene>/.
+    /// as files into DIR/<scene>/ (PNG, or EXR for the images of radiance with --format exr).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// File format of the reference and the reconstructions --out writes: png (8-bit sRGB,

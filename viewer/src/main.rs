@@ -165,7 +165,8 @@ struct Args {
     #[arg(long, value_name = "N")]
     frames: Option<u64>,
 
-    /// Write every frame as DIR/frame_00001.png ... and per-frame stats to DIR/stats.jsonl.
+    /// Write every frame as DIR/frame_00001.png (.exr with --format exr) ... and per-frame
+    /// stats to DIR/stats.jsonl.
     /// Headless runs write to ./edgepoint-frames when not given; with a window, only when given.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
