@@ -313,14 +313,19 @@ async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
 
 /// The first frame reconstructed with `mode` within 50 frames; no rejections on the way.
 async fn first_frame_made_with(v: &mut common::Viewer, mode: pb::Reconstruction) -> pb::Frame {
+    first_frame_where(v, &format!("made with {mode:?}"), |f| f.reconstruction == mode as i32).await
+}
+
+/// The first frame within 50 frames for which `pred` holds; no rejections on the way.
+async fn first_frame_where(v: &mut common::Viewer, what: &str, pred: impl Fn(&pb::Frame) -> bool) -> pb::Frame {
     for _ in 0..50 {
         let (f, r) = v.frame(10).await;
         assert!(r.is_empty(), "{r:?}");
-        if f.reconstruction == mode as i32 {
+        if pred(&f) {
             return f;
         }
     }
-    panic!("no frame made with {mode:?} within 50 frames");
+    panic!("no frame {what} within 50 frames");
 }
 
 /// Paper §6 in a live session: the edge trees take over from the brute-force finder, the
@@ -395,12 +400,5 @@ async fn frames_switch_to_linear_half_floats_and_back() {
 }
 
 async fn first_frame_encoded(v: &mut common::Viewer, encoding: pb::FrameEncoding) -> pb::Frame {
-    for _ in 0..50 {
-        let (f, r) = v.frame(10).await;
-        assert!(r.is_empty(), "{r:?}");
-        if f.encoding == encoding as i32 {
-            return f;
-        }
-    }
-    panic!("no frame encoded as {encoding:?} within 50 frames");
+    first_frame_where(v, &format!("encoded as {encoding:?}"), |f| f.encoding == encoding as i32).await
 }

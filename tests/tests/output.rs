@@ -1,6 +1,7 @@
 //! Output for rendering engineers through the real binaries: linear EXR frames written
 //! headless, mirrored to a fake tev that parses the protocol's packets, tone-mapped PNGs;
 //! and the tone curve `clip` at exposure 0 against the renderer's own sRGB table.
+use edgepoint_tests::run_viewer_headless;
 use edgepoint_viewer::tev::{read_packet, Packet, CHANNELS};
 use edgepoint_viewer::tonemap::{Look, ToneCurve, ToneMapper};
 use half::f16;
@@ -42,14 +43,7 @@ fn headless_exr_frames_are_linear_and_tev_gets_the_same_values() {
     let out = temp("exr");
     let (tev, packets) = fake_tev();
     let (w, h) = (64u32, 48u32);
-    let status = Command::new(viewer())
-        .args(["--local", "--headless", "--frames", "4", "--width", "64", "--height", "48", "--quiet", "--format", "exr"])
-        .args(["--tev", &tev])
-        .arg("--out")
-        .arg(&out)
-        .env("RUST_LOG", "warn")
-        .status()
-        .expect("viewer runs");
+    let status = run_viewer_headless(&["--frames", "4", "--width", "64", "--height", "48", "--format", "exr", "--tev", &tev], &out);
     assert!(status.success(), "viewer exit status {status}");
     let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
     let lines: Vec<serde_json::Value> = stats.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
@@ -84,14 +78,7 @@ fn headless_exr_frames_are_linear_and_tev_gets_the_same_values() {
 #[test]
 fn exposure_and_filmic_write_tone_mapped_pngs_and_bad_combinations_fail_clearly() {
     let out = temp("filmic");
-    let status = Command::new(viewer())
-        .args(["--local", "--headless", "--frames", "2", "--width", "48", "--height", "32", "--quiet"])
-        .args(["--exposure", "1", "--tonemap", "filmic"])
-        .arg("--out")
-        .arg(&out)
-        .env("RUST_LOG", "warn")
-        .status()
-        .expect("viewer runs");
+    let status = run_viewer_headless(&["--frames", "2", "--width", "48", "--height", "32", "--exposure", "1", "--tonemap", "filmic"], &out);
     assert!(status.success());
     let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
     assert!(stats.lines().all(|l| l.contains(r#""encoding":"linear-half-lz4""#)), "{stats}");
