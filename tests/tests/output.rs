@@ -8,6 +8,7 @@ use half::f16;
 use std::net::TcpListener;
 use std::process::Command;
 use std::sync::mpsc;
+use std::time::Duration;
 
 fn viewer() -> std::path::PathBuf {
     edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built")
@@ -20,8 +21,8 @@ fn temp(tag: &str) -> std::path::PathBuf {
 }
 
 /// A stand-in for tev: accepts connections one after another and sends every packet it
-/// parses to the test.
-fn fake_tev() -> (String, mpsc::Receiver<Packet>) {
+/// parses to the test, then `None` when a connection ends.
+fn fake_tev() -> (String, mpsc::Receiver<Option<Packet>>) {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     let (tx, rx) = mpsc::channel();
@@ -29,9 +30,12 @@ fn fake_tev() -> (String, mpsc::Receiver<Packet>) {
         for conn in listener.incoming() {
             let Ok(mut s) = conn else { return };
             while let Ok(Some(p)) = read_packet(&mut s) {
-                if tx.send(p).is_err() {
+                if tx.send(Some(p)).is_err() {
                     return;
                 }
+            }
+            if tx.send(None).is_err() {
+                return;
             }
         }
     });
@@ -62,7 +66,11 @@ fn headless_exr_frames_are_linear_and_tev_gets_the_same_values() {
     }
     // Every frame went to tev as one 64x48 tile (the last one at least: the mirror sends
     // the newest frame and the one waiting when the viewer ends).
-    let got: Vec<Packet> = packets.try_iter().collect();
+    // The viewer has exited, so its connection ends after the last packet it sent.
+    let mut got = Vec::new();
+    while let Some(p) = packets.recv_timeout(Duration::from_secs(30)).expect("the viewer connected to tev and closed the connection") {
+        got.push(p);
+    }
     let Some(Packet::CreateImage { name, width, height, channels, grab_focus }) = got.first() else { panic!("{got:?}") };
     assert_eq!((name.as_str(), *width, *height, *grab_focus), ("edgepoint cornell", 64, 48, true));
     assert_eq!(channels, &CHANNELS);
