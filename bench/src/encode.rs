@@ -7,6 +7,11 @@
 //! The frame is one a session would send: the scene's edge-and-point reconstruction from a
 //! Render Cache holding samples of the given density (or a PNG given with `--image`). One
 //! thread: that thread's CPU time; all threads: wall clock on a pool of that many.
+//!
+//! The linear encoding (half floats, LZ4) is measured against QOI on the same frame: the
+//! server's encode, the viewer's decode and tone mapping (against decoding QOI), bytes per
+//! frame; and EXR writes of the decoded frame with each lossless compression (wall clock:
+//! the `exr` crate compresses blocks on its own threads).
 use crate::clock::{thread_cpu_ms, wall_ms};
 use crate::inprocess::{jittered_picks, reconstructed_frame, Staged};
 use crate::stats::median;
@@ -17,6 +22,9 @@ use edgepoint_server::encode::{decode_frame, encode_srgb8, to_srgb8, FrameEncode
 use edgepoint_server::image_metrics::srgb8_to_linear;
 use edgepoint_server::srgb::reference_code;
 use edgepoint_server::session::SessionOutput;
+use edgepoint_proto::linear_frame;
+use edgepoint_viewer::exr_file::{write_half_with, Compression};
+use edgepoint_viewer::tonemap::{Look, ToneCurve, ToneMapper};
 use glam::Vec3;
 use prost::Message;
 use serde_json::json;
@@ -145,9 +153,18 @@ fn measure(frame: &[Vec3], w: u32, h: u32, iterations: usize, cpu: bool) -> Resu
         }),
     );
     m.insert("encode_raw", time(&mut || drop(enc.encode(frame, w, h, FrameEncoding::RawRgb8).expect("encodes"))));
+    m.insert("encode_linear", time(&mut || drop(enc.encode(frame, w, h, FrameEncoding::LinearHalfLz4).expect("encodes"))));
+    // The viewer's side: decoding and showing each kind of frame.
+    let lin = enc.encode(frame, w, h, FrameEncoding::LinearHalfLz4)?;
+    let qoi = enc.encode(frame, w, h, FrameEncoding::Qoi)?;
+    let decoded = linear_frame::decode(&lin, w, h)?;
+    let tone = ToneMapper::new(Look { exposure: 1.0, curve: ToneCurve::Filmic });
+    m.insert("viewer_decode_qoi", time(&mut || drop(decode_frame(&qoi, FrameEncoding::Qoi, w, h).expect("decodes"))));
+    m.insert("viewer_decode_linear", time(&mut || drop(linear_frame::decode(&lin, w, h).expect("decodes"))));
+    m.insert("viewer_tonemap", time(&mut || drop(tone.map(&decoded))));
     // Publishing: the frame message handed to the session's output, taken by the stream and
     // serialised as the gRPC layer does.
-    let data = enc.encode(frame, w, h, FrameEncoding::Qoi)?;
+    let data = qoi;
     let out = SessionOutput::new();
     m.insert(
         "publish",
@@ -167,6 +184,30 @@ fn measure(frame: &[Vec3], w: u32, h: u32, iterations: usize, cpu: bool) -> Resu
         }),
     );
     Ok(m)
+}
+
+/// EXR writes of the frame's half floats with each lossless compression: median wall-clock
+/// ms and file bytes.
+fn measure_exr(frame: &[Vec3], w: u32, h: u32, iterations: usize) -> Result<serde_json::Value> {
+    let lin = linear_frame::LinearFrame::from_linear(frame, w, h);
+    let dir = std::env::temp_dir().join(format!("edgepoint-bench-exr-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let path = dir.join("frame.exr");
+    let mut out = serde_json::Map::new();
+    for (name, c) in [("uncompressed", Compression::Uncompressed), ("rle", Compression::RLE), ("zip16", Compression::ZIP16), ("piz", Compression::PIZ)] {
+        let mut v = Vec::with_capacity(iterations);
+        for i in 0..iterations.min(10) + 1 {
+            let t0 = wall_ms();
+            write_half_with(&path, &lin, c)?;
+            if i > 0 {
+                v.push(wall_ms() - t0);
+            }
+        }
+        let bytes = std::fs::metadata(&path)?.len();
+        out.insert(name.into(), json!({ "write_ms": median(&v), "bytes": bytes }));
+    }
+    std::fs::remove_dir_all(&dir)?;
+    Ok(out.into())
 }
 
 pub fn run(args: EncodeArgs) -> Result<()> {
@@ -215,6 +256,11 @@ pub fn run(args: EncodeArgs) -> Result<()> {
         let mut before = Vec::new();
         baseline::to_srgb8(frame, *w as usize, &mut before);
         let ours = FrameEncoder::new().encode(frame, *w, *h, FrameEncoding::Qoi)?;
+        let linear = FrameEncoder::new().encode(frame, *w, *h, FrameEncoding::LinearHalfLz4)?;
+        if linear_frame::decode(&linear, *w, *h)? != linear_frame::LinearFrame::from_linear(frame, *w, *h) {
+            bail!("{name}: the linear frame does not decode to the frame's half floats");
+        }
+        let exr = measure_exr(frame, *w, *h, args.iterations)?;
         let theirs = encode_srgb8(&rgb, *w, *h, FrameEncoding::Qoi)?;
         if decode_frame(&ours, FrameEncoding::Qoi, *w, *h)?.concat() != rgb {
             bail!("{name}: the QOI frame does not decode to the frame's sRGB bytes");
@@ -248,6 +294,21 @@ pub fn run(args: EncodeArgs) -> Result<()> {
                 m["publish"],
                 ours.len(),
             )?;
+            writeln!(
+                table,
+                "  {:>28} | linear {:>6.3} ms ({:.2}x QOI), {} bytes ({:.2}x QOI); viewer: decode {:.3} + tone map {:.3} ms vs QOI decode {:.3}",
+                "",
+                m["encode_linear"],
+                ratio("encode_linear", "encode_qoi"),
+                linear.len(),
+                linear.len() as f64 / ours.len() as f64,
+                m["viewer_decode_linear"],
+                m["viewer_tonemap"],
+                m["viewer_decode_qoi"],
+            )?;
+            if *threads == 1 {
+                writeln!(table, "  {:>28} | EXR half writes (ms, bytes): {exr}", "")?;
+            }
             runs.push(json!({
                 "frame": name, "width": w, "height": h, "threads": threads,
                 "clock": if *threads == 1 { "thread CPU time" } else { "wall clock" },
@@ -258,6 +319,11 @@ pub fn run(args: EncodeArgs) -> Result<()> {
                 "encode_qoi_plus_publish_ms": m["encode_qoi"] + m["publish"],
                 "qoi_bytes": ours.len(),
                 "qoi_bytes_image_crate": theirs.len(),
+                "linear_bytes": linear.len(),
+                "linear_over_qoi_bytes": linear.len() as f64 / ours.len() as f64,
+                "linear_over_qoi_encode_time": ratio("encode_linear", "encode_qoi"),
+                "viewer_linear_over_qoi_time": (m["viewer_decode_linear"] + m["viewer_tonemap"]) / m["viewer_decode_qoi"],
+                "exr_half": exr.clone(),
                 "channels_rounded_differently_from_baseline": differ,
             }));
         }

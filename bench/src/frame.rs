@@ -85,9 +85,14 @@ pub struct FrameArgs {
     /// Skip the reference renders (no PSNR, no speedup).
     #[arg(long)]
     pub no_reference: bool,
-    /// Write the last frame and the references as PNG files into this directory.
+    /// Write the last frame and the references as PNG (or, with --format exr, EXR) files into
+    /// this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// File format of the images --out writes: png (8-bit sRGB, clipped) or exr (linear RGB
+    /// float, never tone-mapped or clipped).
+    #[arg(long, value_enum, default_value_t = FileFormat::Png)]
+    pub format: FileFormat,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -97,9 +102,13 @@ pub struct FrameArgs {
 pub struct ReferenceArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
-    /// Directory for reference_1spp.png and reference_<spp>spp.png.
+    /// Directory for reference_1spp.png and reference_<spp>spp.png (.exr with --format exr).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// File format of the references: png (8-bit sRGB, clipped) or exr (linear RGB float,
+    /// never tone-mapped or clipped).
+    #[arg(long, value_enum, default_value_t = FileFormat::Png)]
+    pub format: FileFormat,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -165,7 +174,8 @@ async fn references(
     Ok(References { converged, converged_cached, one_spp })
 }
 
-use crate::inprocess::write_png;
+use crate::inprocess::write_image;
+use edgepoint_viewer::headless::FileFormat;
 
 /// The `start` message of a bench session: `source` at `width` × `height` with the shader,
 /// its parameters, the viewer's --camera (over the scene's) and `settings`.
@@ -297,7 +307,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
         });
         if let Some(dir) = &args.out {
             std::fs::create_dir_all(dir)?;
-            write_png(&dir.join("last_frame.png"), a.width, a.height, &frame_lin)?;
+            write_image(&dir.join("last_frame"), args.format, a.width, a.height, &frame_lin)?;
         }
         if !args.no_reference {
             let refs = references(&cluster, a, &source, &camera).await?;
@@ -314,8 +324,9 @@ pub fn run(args: FrameArgs) -> Result<()> {
             // Paper Table 2: "Full RT (s)" over the frame's total pipeline time.
             out["speedup_vs_full_rt"] = json!(if median_total > 0.0 { full_rt_s * 1e3 / median_total } else { 0.0 });
             if let Some(dir) = &args.out {
-                write_png(&dir.join(format!("reference_{}spp.png", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP))), a.width, a.height, &refs.converged.pixels)?;
-                write_png(&dir.join("reference_1spp.png"), a.width, a.height, &refs.one_spp.pixels)?;
+                let stem = dir.join(format!("reference_{}spp", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
+                write_image(&stem, args.format, a.width, a.height, &refs.converged.pixels)?;
+                write_image(&dir.join("reference_1spp"), args.format, a.width, a.height, &refs.one_spp.pixels)?;
             }
         }
         let mut table = String::new();
@@ -375,10 +386,9 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
         };
         let refs = references(&cluster, a, &source, &camera).await?;
         std::fs::create_dir_all(&args.out)?;
-        let conv = args.out.join(format!("reference_{}spp.png", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
-        let one = args.out.join("reference_1spp.png");
-        write_png(&conv, a.width, a.height, &refs.converged.pixels)?;
-        write_png(&one, a.width, a.height, &refs.one_spp.pixels)?;
+        let conv = args.out.join(format!("reference_{}spp", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
+        let conv = write_image(&conv, args.format, a.width, a.height, &refs.converged.pixels)?;
+        let one = write_image(&args.out.join("reference_1spp"), args.format, a.width, a.height, &refs.one_spp.pixels)?;
         let out = json!({
             "scene": a.scene, "width": a.width, "height": a.height, "workers": a.workers,
             "reference_spp": a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP),

@@ -16,7 +16,8 @@ use edgepoint_scene::Progress;
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
 use glam::Vec3;
 use std::collections::HashMap;
-use std::path::Path;
+use edgepoint_viewer::headless::FileFormat;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// A scene loaded for in-process shading.
@@ -256,10 +257,52 @@ pub fn reconstructed_frame(staged: &Staged, cam: &CameraFrame, samples: &[Sample
 }
 
 /// Writes a linear-RGB image as an sRGB PNG.
+/// Writes linear pixels as `stem.png` (8-bit sRGB, clipped) or `stem.exr` (linear RGB
+/// float, as rendered: references are ground truth, so no bit is dropped); returns the path.
+pub fn write_image(stem: &Path, format: FileFormat, w: u32, h: u32, linear: &[Vec3]) -> Result<PathBuf> {
+    // Appended, not `with_extension`: stems like `epr_05.0` hold a dot.
+    let with = |ext: &str| {
+        let mut p = stem.as_os_str().to_owned();
+        p.push(ext);
+        PathBuf::from(p)
+    };
+    match format {
+        FileFormat::Png => {
+            let path = with(".png");
+            write_png(&path, w, h, linear)?;
+            Ok(path)
+        }
+        FileFormat::Exr => {
+            let path = with(".exr");
+            edgepoint_viewer::exr_file::write_f32(&path, w, h, linear)?;
+            Ok(path)
+        }
+    }
+}
+
 pub fn write_png(path: &Path, w: u32, h: u32, linear: &[Vec3]) -> Result<()> {
     let mut bytes = Vec::with_capacity(linear.len() * 3);
     for c in linear {
         bytes.extend_from_slice(&edgepoint_server::image_metrics::linear_to_srgb8(*c));
     }
     image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgb8).with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod write_image_tests {
+    use super::*;
+
+    #[test]
+    fn images_keep_dotted_stems_and_exr_keeps_the_linear_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let px = vec![Vec3::new(0.25, 3.5, 1e-4), Vec3::new(12.0, 0.0, 0.5)];
+        let png = write_image(&dir.path().join("epr_05.0"), FileFormat::Png, 2, 1, &px).unwrap();
+        assert_eq!(png.file_name().unwrap(), "epr_05.0.png");
+        assert_eq!(image::open(&png).unwrap().to_rgb8().get_pixel(0, 0).0[1], 255, "PNG clips");
+        let exr = write_image(&dir.path().join("epr_05.0"), FileFormat::Exr, 2, 1, &px).unwrap();
+        assert_eq!(exr.file_name().unwrap(), "epr_05.0.exr");
+        let (w, h, v) = edgepoint_viewer::exr_file::read_rgb(&exr).unwrap();
+        assert_eq!((w, h), (2, 1));
+        assert_eq!(v, vec![0.25, 3.5, 1e-4, 12.0, 0.0, 0.5], "EXR keeps every f32, past 1 too");
+    }
 }

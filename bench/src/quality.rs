@@ -6,7 +6,7 @@
 //! sample set of each density is the pixels whose hashed rank is below it (so the 1 % set is
 //! part of the 5 % set, which is part of the 20 % set). Each set goes into a Render Cache,
 //! is reprojected once, and is reconstructed both ways.
-use crate::inprocess::{cache_with, jittered_picks, write_png, Staged};
+use crate::inprocess::{cache_with, jittered_picks, write_image, write_png, Staged};
 use anyhow::{bail, Result};
 use edgepoint_server::edges::finder::EdgeFinder;
 use edgepoint_server::edges::EdgeCounts;
@@ -57,9 +57,14 @@ pub struct QualityArgs {
     #[arg(long = "shader-param", value_parser = crate::frame::parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Write the reference, both reconstructions and the EPI class overlay of every density
-    /// as PNG files into DIR/<scene>/.
+    /// as files into DIR/<scene>/ (PNG, or EXR for the images of radiance with --format exr).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// File format of the reference and the reconstructions --out writes: png (8-bit sRGB,
+    /// clipped) or exr (linear RGB float, never tone-mapped or clipped). The class and
+    /// sample overlays are always PNG.
+    #[arg(long, value_enum, default_value_t = edgepoint_viewer::headless::FileFormat::Png)]
+    pub format: edgepoint_viewer::headless::FileFormat,
     /// Tuning: interpolation kernel sigma in pixels.
     #[arg(long, default_value_t = edgepoint_server::epi::DEFAULT_SIGMA)]
     pub sigma: f32,
@@ -149,7 +154,7 @@ pub fn run(args: QualityArgs) -> Result<()> {
         let dir = args.out.as_ref().map(|d| d.join(&tag));
         if let Some(d) = &dir {
             std::fs::create_dir_all(d)?;
-            write_png(&d.join("reference.png"), w, h, &reference)?;
+            write_image(&d.join("reference"), args.format, w, h, &reference)?;
         }
         // Hard shadow boundaries (point lights): the error there is reported apart, to show
         // what the shadow edges do (compare with --no-shadow-edges).
@@ -249,8 +254,8 @@ pub fn run(args: QualityArgs) -> Result<()> {
             }));
             if let Some(d) = &dir {
                 let pct = format!("{:04.1}", density * 100.0);
-                write_png(&d.join(format!("render_cache_{pct}.png")), w, h, &baseline)?;
-                write_png(&d.join(format!("epr_{pct}.png")), w, h, &epr)?;
+                write_image(&d.join(format!("render_cache_{pct}")), args.format, w, h, &baseline)?;
+                write_image(&d.join(format!("epr_{pct}")), args.format, w, h, &epr)?;
                 let mut classes = epr.clone();
                 epi.draw_overlay(Overlay::Classes, &mut classes);
                 write_png(&d.join(format!("classes_{pct}.png")), w, h, &classes)?;

@@ -2,7 +2,10 @@
 //! kept as linear RGB inside the renderer and leaves as sRGB 8-bit, raw or compressed as the
 //! viewer asked — raw RGB8, QOI (lossless, fastest), PNG (lossless, fast compression level)
 //! or JPEG (quality 90, smallest). QOI is encoded here (bands of rows in parallel, fused
-//! with the conversion to sRGB); PNG and JPEG by the `image` crate.
+//! with the conversion to sRGB); PNG and JPEG by the `image` crate. The linear encoding
+//! (half floats, LZ4; [`linear`]) keeps the radiance for viewers that write EXR, feed tev or
+//! tone-map themselves.
+pub mod linear;
 pub mod qoi;
 
 use crate::srgb;
@@ -30,6 +33,10 @@ pub enum CodecError {
     DecodedSize { encoding: &'static str, got_w: u32, got_h: u32, width: u32, height: u32 },
     #[error("raw frame has {got} bytes, expected {expected}")]
     RawLength { got: usize, expected: usize },
+    #[error("{encoding} frames are made from linear pixels, not from sRGB bytes")]
+    NotFromSrgb { encoding: &'static str },
+    #[error("{0}")]
+    Linear(#[from] edgepoint_proto::linear_frame::LinearFrameError),
 }
 
 /// The encoding a request resolves to: `UNSPECIFIED` means QOI.
@@ -46,6 +53,7 @@ fn name(e: FrameEncoding) -> &'static str {
         FrameEncoding::Qoi => "QOI",
         FrameEncoding::Png => "PNG",
         FrameEncoding::Jpeg => "JPEG",
+        FrameEncoding::LinearHalfLz4 => "linear half LZ4",
         FrameEncoding::Unspecified => unreachable!("resolved above"),
     }
 }
@@ -93,6 +101,7 @@ pub struct FrameEncoder {
     bands: Vec<Band>,
     /// The sRGB bytes handed to the PNG and JPEG encoders.
     rgb: Vec<u8>,
+    linear: linear::LinearEncoder,
 }
 
 impl FrameEncoder {
@@ -106,6 +115,7 @@ impl FrameEncoder {
         check_size(linear, width, height)?;
         match effective_encoding(encoding) {
             FrameEncoding::Qoi => Ok(self.qoi(linear, width as usize, height as usize)),
+            FrameEncoding::LinearHalfLz4 => Ok(self.linear.encode(linear, width as usize, height as usize)),
             FrameEncoding::RawRgb8 => {
                 let mut out = Vec::new();
                 to_srgb8(linear, width, height, &mut out)?;
@@ -193,13 +203,19 @@ pub fn encode_srgb8(rgb: &[u8], width: u32, height: u32, encoding: FrameEncoding
                 .map_err(wrap)?;
             Ok(out)
         }
+        FrameEncoding::LinearHalfLz4 => Err(CodecError::NotFromSrgb { encoding: enc }),
         FrameEncoding::Unspecified => unreachable!("resolved by effective_encoding"),
     }
 }
 
-/// Decodes a frame made by [`encode_frame`] back to sRGB8 pixels, checking its size.
+/// Decodes a frame made by [`encode_frame`] back to sRGB8 pixels, checking its size (a
+/// linear frame through the sRGB table, as the QOI path would have encoded its half floats).
 pub fn decode_frame(bytes: &[u8], encoding: FrameEncoding, width: u32, height: u32) -> Result<Vec<[u8; 3]>, CodecError> {
     let encoding = effective_encoding(encoding);
+    if encoding == FrameEncoding::LinearHalfLz4 {
+        let f = edgepoint_proto::linear_frame::decode(bytes, width, height)?.to_f32();
+        return Ok(f.chunks_exact(3).map(|c| [srgb::encode(c[0]), srgb::encode(c[1]), srgb::encode(c[2])]).collect());
+    }
     let enc = name(encoding);
     let n = width as usize * height as usize;
     let flat = match encoding {
@@ -299,6 +315,27 @@ mod tests {
             let theirs = encode_srgb8(&rgb, w, h, FrameEncoding::Qoi).unwrap();
             assert_eq!(decode_frame(&theirs, FrameEncoding::Qoi, w, h).unwrap(), want);
         }
+    }
+
+    /// The parallel band encoder writes the bytes of the one-thread reference encoder,
+    /// from a fresh or a reused encoder, and its frames decode to the half floats of the
+    /// linear pixels; sRGB bytes cannot be made into a linear frame.
+    #[test]
+    fn linear_frames_match_the_reference_encoder_and_round_trip() {
+        use edgepoint_proto::linear_frame::{self, LinearFrame};
+        let mut reused = FrameEncoder::new();
+        for (w, h) in [(1, 1), (5, 17), (64, 100), (33, 2 * BAND_ROWS as u32 + 1)] {
+            let frame: Vec<Vec3> = test_frame(w, h).into_iter().map(|c| c * 30.0).collect();
+            let want = linear_frame::encode(&frame, w, h);
+            for enc in [FrameEncoding::Qoi, FrameEncoding::LinearHalfLz4] {
+                let _ = reused.encode(&frame, w, h, enc).unwrap();
+            }
+            assert_eq!(reused.encode(&frame, w, h, FrameEncoding::LinearHalfLz4).unwrap(), want, "{w}x{h}");
+            assert_eq!(encode_frame(&frame, w, h, FrameEncoding::LinearHalfLz4).unwrap(), want);
+            assert_eq!(linear_frame::decode(&want, w, h).unwrap(), LinearFrame::from_linear(&frame, w, h));
+        }
+        assert!(matches!(encode_srgb8(&[0; 3], 1, 1, FrameEncoding::LinearHalfLz4), Err(CodecError::NotFromSrgb { .. })));
+        assert!(matches!(decode_frame(b"EPH1", FrameEncoding::LinearHalfLz4, 1, 1), Err(CodecError::Linear(_))));
     }
 
     #[test]

@@ -313,14 +313,19 @@ async fn edge_and_point_frames_classify_pixels_and_switch_mode_mid_session() {
 
 /// The first frame reconstructed with `mode` within 50 frames; no rejections on the way.
 async fn first_frame_made_with(v: &mut common::Viewer, mode: pb::Reconstruction) -> pb::Frame {
+    first_frame_where(v, &format!("made with {mode:?}"), |f| f.reconstruction == mode as i32).await
+}
+
+/// The first frame within 50 frames for which `pred` holds; no rejections on the way.
+async fn first_frame_where(v: &mut common::Viewer, what: &str, pred: impl Fn(&pb::Frame) -> bool) -> pb::Frame {
     for _ in 0..50 {
         let (f, r) = v.frame(10).await;
         assert!(r.is_empty(), "{r:?}");
-        if f.reconstruction == mode as i32 {
+        if pred(&f) {
             return f;
         }
     }
-    panic!("no frame made with {mode:?} within 50 frames");
+    panic!("no frame {what} within 50 frames");
 }
 
 /// Paper §6 in a live session: the edge trees take over from the brute-force finder, the
@@ -356,4 +361,44 @@ async fn shadow_edges_from_reported_triples_reach_the_frames_and_follow_a_move()
         }
         assert!(tokio::time::Instant::now() < deadline, "the shadow edges never followed the move: {e:?}");
     }
+}
+
+/// A viewer switches its frames to the linear encoding mid-session (what the window does
+/// when an exposure key is pressed) and back; an unknown encoding is rejected and changes
+/// nothing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_switch_to_linear_half_floats_and_back() {
+    let w = Worker::spawn();
+    let (addr, _h) = spawn_renderer(vec![w.url.clone()], 4).await;
+    let (width, height) = (40u32, 30u32);
+    let mut v = open(&addr, start_msg(cornell(), width, height)).await.unwrap();
+    v.started().await;
+    let f = v.frame_with_samples(20).await;
+    assert_eq!(f.encoding, pb::FrameEncoding::Qoi as i32);
+
+    let linear = pb::Settings { encoding: pb::FrameEncoding::LinearHalfLz4 as i32, ..Default::default() };
+    v.send(In::Settings(linear)).await;
+    let f = first_frame_encoded(&mut v, pb::FrameEncoding::LinearHalfLz4).await;
+    let lin = pb::linear_frame::decode(&f.data, width, height).unwrap().to_f32();
+    assert!(lin.iter().all(|x| x.is_finite() && *x >= 0.0));
+    assert!(lin.iter().any(|x| *x > 0.01), "a lit room is not black");
+    // The sRGB view of the linear frame decodes through the same path as every encoding.
+    assert_eq!(decode_frame(&f.data, pb::FrameEncoding::LinearHalfLz4, width, height).unwrap().len(), 1200);
+
+    v.send(In::Settings(pb::Settings { encoding: 77, ..Default::default() })).await;
+    let mut rejected = Vec::new();
+    while rejected.is_empty() {
+        let (f, r) = v.frame(10).await;
+        assert_eq!(f.encoding, pb::FrameEncoding::LinearHalfLz4 as i32, "a rejected switch changes nothing");
+        rejected.extend(r);
+    }
+    assert!(rejected[0].message.contains("encoding 77"), "{}", rejected[0].message);
+
+    v.send(In::Settings(pb::Settings { encoding: pb::FrameEncoding::Qoi as i32, ..Default::default() })).await;
+    let f = first_frame_encoded(&mut v, pb::FrameEncoding::Qoi).await;
+    assert_eq!(decode_frame(&f.data, pb::FrameEncoding::Qoi, width, height).unwrap().len(), 1200);
+}
+
+async fn first_frame_encoded(v: &mut common::Viewer, encoding: pb::FrameEncoding) -> pb::Frame {
+    first_frame_where(v, &format!("encoded as {encoding:?}"), |f| f.encoding == encoding as i32).await
 }

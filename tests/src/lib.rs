@@ -21,6 +21,20 @@ pub fn cluster(workers: usize) -> Result<LocalCluster> {
     })
 }
 
+/// Runs the real viewer headless with a local cluster (`--local --headless --quiet`), `args`
+/// and `--out out`, warnings only in its log; returns its exit status.
+pub fn run_viewer_headless(args: &[&str], out: &std::path::Path) -> std::process::ExitStatus {
+    let viewer = edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built");
+    std::process::Command::new(viewer)
+        .args(["--local", "--headless", "--quiet"])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .env("RUST_LOG", "warn")
+        .status()
+        .expect("viewer runs")
+}
+
 /// A `Start` for a built-in scene at a small size with QOI frames.
 pub fn start_builtin(scene: &str, width: u32, height: u32) -> pb::Start {
     pb::Start {

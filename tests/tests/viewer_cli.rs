@@ -3,16 +3,9 @@ use std::process::Command;
 
 #[test]
 fn headless_local_run_writes_frames_and_stats() {
-    let viewer = edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built");
     let out = std::env::temp_dir().join(format!("edgepoint-viewer-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let status = Command::new(viewer)
-        .args(["--local", "--headless", "--frames", "6", "--width", "64", "--height", "48", "--quiet", "--orbit"])
-        .arg("--out")
-        .arg(&out)
-        .env("RUST_LOG", "warn")
-        .status()
-        .expect("viewer runs");
+    let status = edgepoint_tests::run_viewer_headless(&["--frames", "6", "--width", "64", "--height", "48", "--orbit"], &out);
     assert!(status.success(), "viewer exit status {status}");
     let pngs = std::fs::read_dir(&out).unwrap().filter(|e| {
         e.as_ref().unwrap().path().extension().map(|x| x == "png").unwrap_or(false)

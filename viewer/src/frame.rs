@@ -1,8 +1,12 @@
-//! Frame bytes to pixels: the four wire encodings of `Frame.data` (raw sRGB8, QOI, PNG,
-//! JPEG; DESIGN.md "One frame in the renderer", step 12) decoded into an RGB image.
+//! Frame bytes to pixels: the wire encodings of `Frame.data` (raw sRGB8, QOI, PNG, JPEG;
+//! DESIGN.md "One frame in the renderer", step 12) decoded into an RGB image, and linear
+//! half-float frames decoded to their radiance and tone-mapped for display.
+use crate::tonemap::{Look, ToneMapper};
 use anyhow::{bail, Context, Result};
+use edgepoint_proto::linear_frame::{self, LinearFrame};
 use edgepoint_proto::{self as pb, FrameEncoding};
 use image::{ImageFormat, RgbImage};
+use std::sync::{Arc, OnceLock};
 
 /// Short lower-case name of a wire encoding (`raw`, `qoi`, `png`, `jpeg`).
 pub fn encoding_name(encoding: i32) -> &'static str {
@@ -11,16 +15,42 @@ pub fn encoding_name(encoding: i32) -> &'static str {
         Ok(FrameEncoding::Qoi) => "qoi",
         Ok(FrameEncoding::Png) => "png",
         Ok(FrameEncoding::Jpeg) => "jpeg",
+        Ok(FrameEncoding::LinearHalfLz4) => "linear-half-lz4",
         Ok(FrameEncoding::Unspecified) => "unspecified",
         Err(_) => "unknown",
     }
 }
 
+/// A decoded frame: what to show or write as PNG, and the radiance when the frame is linear.
+pub struct Decoded {
+    pub image: RgbImage,
+    pub linear: Option<Arc<LinearFrame>>,
+}
+
+/// Decodes a frame; a linear frame is tone-mapped with `tone` (an sRGB frame is shown as it
+/// is: exposure and tone mapping need the radiance).
+pub fn decode_with(f: &pb::Frame, tone: &ToneMapper) -> Result<Decoded> {
+    if f.encoding == FrameEncoding::LinearHalfLz4 as i32 {
+        let lin = linear_frame::decode(&f.data, f.width, f.height).with_context(|| describe(f))?;
+        return Ok(Decoded { image: tone.map(&lin), linear: Some(Arc::new(lin)) });
+    }
+    Ok(Decoded { image: decode_frame(f)?, linear: None })
+}
+
+fn describe(f: &pb::Frame) -> String {
+    format!("frame {} ({}, {}x{}, {} bytes)", f.sequence, encoding_name(f.encoding), f.width, f.height, f.data.len())
+}
+
 /// Decodes a frame into 8-bit sRGB pixels and checks that the image has the size the
-/// frame claims. Errors name the frame's sequence number and encoding.
+/// frame claims (a linear frame with exposure 0 and clipping: the renderer's own sRGB of
+/// its half floats). Errors name the frame's sequence number and encoding.
 pub fn decode_frame(f: &pb::Frame) -> Result<RgbImage> {
     let (w, h) = (f.width, f.height);
-    let what = || format!("frame {} ({}, {}x{}, {} bytes)", f.sequence, encoding_name(f.encoding), w, h, f.data.len());
+    let what = || describe(f);
+    if f.encoding == FrameEncoding::LinearHalfLz4 as i32 {
+        static IDENTITY: OnceLock<ToneMapper> = OnceLock::new();
+        return Ok(decode_with(f, IDENTITY.get_or_init(|| ToneMapper::new(Look::default())))?.image);
+    }
     let img = match FrameEncoding::try_from(f.encoding) {
         Ok(FrameEncoding::RawRgb8) => {
             let want = w as u64 * h as u64 * 3;

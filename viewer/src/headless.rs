@@ -1,9 +1,11 @@
-//! Headless output: every frame as `DIR/frame_00001.png` and one JSON line of stats per
-//! frame in `DIR/stats.jsonl` — the per-stage milliseconds of paper 000 Table 2 and the
+//! Headless output: every frame as `DIR/frame_00001.png` (tone-mapped sRGB) or
+//! `DIR/frame_00001.exr` (linear, `--format exr`) and one JSON line of stats per frame in
+//! `DIR/stats.jsonl` — the per-stage milliseconds of paper 000 Table 2 and the
 //! pixel classes of Table 3 as the server reports them, plus what the viewer measures
 //! (arrival time, interval, fps), so a headless run can reproduce those tables.
-use crate::frame::{decode_frame, encoding_name};
-use anyhow::{Context, Result};
+use crate::frame::{decode_with, encoding_name, Decoded};
+use crate::tonemap::{Look, ToneMapper};
+use anyhow::{bail, Context, Result};
 use edgepoint_proto::{self as pb, FrameEncoding};
 use image::{ImageEncoder, RgbImage};
 use serde::ser::{Serialize, SerializeMap, Serializer};
@@ -18,7 +20,28 @@ pub const STATS_FILE: &str = "stats.jsonl";
 
 /// File name of the `index`-th frame written (1-based): `frame_00001.png`.
 pub fn frame_file_name(index: u64) -> String {
-    format!("frame_{index:05}.png")
+    FileFormat::Png.file_name(index)
+}
+
+/// The file format of headless frames (`--format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum FileFormat {
+    /// 8-bit sRGB PNG, after exposure and tone mapping.
+    #[default]
+    Png,
+    /// OpenEXR, linear RGB half floats: never tone-mapped or clipped.
+    Exr,
+}
+
+impl FileFormat {
+    /// `frame_00001.png` / `frame_00001.exr`.
+    pub fn file_name(self, index: u64) -> String {
+        let ext = match self {
+            FileFormat::Png => "png",
+            FileFormat::Exr => "exr",
+        };
+        format!("frame_{index:05}.{ext}")
+    }
 }
 
 /// One frame's stats: what the server reported plus what the viewer measured.
@@ -260,13 +283,16 @@ impl FrameStats {
     }
 }
 
-/// Writes frames as PNGs and their stats as JSON lines into one directory.
+/// Writes frames as PNG or EXR files and their stats as JSON lines into one directory.
 pub struct HeadlessWriter {
     dir: PathBuf,
     stats: BufWriter<File>,
     echo_stdout: bool,
     meter: FrameMeter,
     last: Option<FrameStats>,
+    format: FileFormat,
+    /// How [`Self::write_frame`] shows linear frames in PNGs.
+    tone: ToneMapper,
 }
 
 impl HeadlessWriter {
@@ -276,7 +302,27 @@ impl HeadlessWriter {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
         let path = dir.join(STATS_FILE);
         let f = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
-        Ok(HeadlessWriter { dir: dir.to_path_buf(), stats: BufWriter::new(f), echo_stdout, meter: FrameMeter::new(), last: None })
+        Ok(HeadlessWriter {
+            dir: dir.to_path_buf(),
+            stats: BufWriter::new(f),
+            echo_stdout,
+            meter: FrameMeter::new(),
+            last: None,
+            format: FileFormat::Png,
+            tone: ToneMapper::new(Look::default()),
+        })
+    }
+
+    /// Writes `format` files (EXR needs linear frames; a frame that is not is an error).
+    pub fn with_format(mut self, format: FileFormat) -> Self {
+        self.format = format;
+        self
+    }
+
+    /// Shows linear frames with `look` in the PNGs [`Self::write_frame`] writes.
+    pub fn with_look(mut self, look: Look) -> Self {
+        self.tone.set_look(look);
+        self
     }
 
     /// One line saying what the run wrote: frames, time, frame rate, the last frame's server
@@ -295,21 +341,33 @@ impl HeadlessWriter {
         self.meter.count()
     }
 
-    /// Decodes `f`, writes it as the next PNG and appends its stats line. A frame that
+    /// Decodes `f`, writes it as the next file and appends its stats line. A frame that
     /// does not decode is an error naming it (nothing is written for it).
     pub fn write_frame(&mut self, f: &pb::Frame, received: Instant) -> Result<FrameStats> {
         let t0 = Instant::now();
-        let img = decode_frame(f)?;
+        let d = decode_with(f, &self.tone)?;
         let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
-        self.write_decoded(f, &img, received, decode_ms)
+        self.write_decoded(f, &d, received, decode_ms)
     }
 
-    /// [`Self::write_frame`] for a frame the caller already decoded into `img` (taking
-    /// `decode_ms`), so a window and the writer share one decode.
-    pub fn write_decoded(&mut self, f: &pb::Frame, img: &RgbImage, received: Instant, decode_ms: f64) -> Result<FrameStats> {
+    /// [`Self::write_frame`] for a frame the caller already decoded (taking `decode_ms`), so
+    /// a window and the writer share one decode.
+    pub fn write_decoded(&mut self, f: &pb::Frame, d: &Decoded, received: Instant, decode_ms: f64) -> Result<FrameStats> {
+        if self.format == FileFormat::Exr && d.linear.is_none() {
+            bail!("frame {} is {}, not linear: EXR files need linear frames", f.sequence, encoding_name(f.encoding));
+        }
         let a = self.meter.arrive(received);
-        let name = frame_file_name(a.index);
+        let name = self.format.file_name(a.index);
         let path = self.dir.join(&name);
+        if let (FileFormat::Exr, Some(lin)) = (self.format, &d.linear) {
+            crate::exr_file::write_half(&path, lin)?;
+        } else {
+            self.write_png(f, &d.image, &name, &path)?;
+        }
+        self.finish_frame(f, a, name, decode_ms)
+    }
+
+    fn write_png(&self, f: &pb::Frame, img: &RgbImage, name: &str, path: &Path) -> Result<()> {
         let png = if f.encoding == FrameEncoding::Png as i32 {
             // Already a PNG (and it decoded): keep the server's bytes.
             f.data.clone()
@@ -325,7 +383,10 @@ impl HeadlessWriter {
             .with_context(|| format!("encoding {name}"))?;
             buf
         };
-        std::fs::write(&path, &png).with_context(|| format!("cannot write {}", path.display()))?;
+        std::fs::write(path, &png).with_context(|| format!("cannot write {}", path.display()))
+    }
+
+    fn finish_frame(&mut self, f: &pb::Frame, a: Arrival, name: String, decode_ms: f64) -> Result<FrameStats> {
         let mut stats = FrameStats::new(f, a);
         stats.file = Some(name);
         stats.decode_ms = decode_ms;

@@ -5,8 +5,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, ValueEnum};
 use edgepoint_proto::{self as pb, FrameEncoding};
 use edgepoint_viewer::client::{camera_from_wire, code_name, SessionSender};
-use edgepoint_viewer::frame::{decode_frame, to_0rgb};
-use edgepoint_viewer::headless::{FrameMeter, FrameStats, HeadlessWriter};
+use edgepoint_viewer::frame::{decode_with, to_0rgb};
+use edgepoint_viewer::headless::{FileFormat, FrameMeter, FrameStats, HeadlessWriter};
+use edgepoint_viewer::tev::TevMirror;
+use edgepoint_viewer::tonemap::{Look, LookControl, ToneCurve, ToneMapper};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use edgepoint_viewer::camera_path::{parse_camera_spec, read_path, suggested_orbit, CameraSpec, OrbitArgs, PathWriter};
 use edgepoint_viewer::script::{CameraPlan, Script, ScriptStep};
@@ -30,10 +32,16 @@ const DEFAULT_HEADLESS_FRAMES: u64 = 300;
 /// child processes that end with the viewer. With a display (DISPLAY or WAYLAND_DISPLAY) and
 /// without --headless, frames show in a window that the mouse and keys drive (listed below;
 /// H or F1 shows them in the window); otherwise each frame is written as
-/// OUT/frame_00001.png with one JSON line of stats per frame in OUT/stats.jsonl, 300 frames
-/// unless --frames says otherwise, and one summary line on stdout at the end (per-frame
-/// lines too with --stats-stdout). Logs go to stderr, filtered by RUST_LOG (default info).
-/// Ctrl-C ends the run cleanly.
+/// OUT/frame_00001.png (or .exr with --format exr) with one JSON line of stats per frame in
+/// OUT/stats.jsonl, 300 frames unless --frames says otherwise, and one summary line on
+/// stdout at the end (per-frame lines too with --stats-stdout). Logs go to stderr, filtered
+/// by RUST_LOG (default info). Ctrl-C ends the run cleanly.
+///
+/// Output: the renderer keeps linear RGB. PNG files and the window show it through
+/// --exposure and --tonemap, then the sRGB transfer; --format exr writes the linear values
+/// themselves (half floats: never tone-mapped or clipped) and --tev mirrors them to the tev
+/// image viewer. Those three make the server send linear frames (half floats, LZ4) instead
+/// of sRGB QOI.
 #[derive(Debug, Parser)]
 #[command(name = "edgepoint-viewer", version, after_help = format!("{KEY_HELP}\n\n{}", edgepoint_proto::shaders::help_text()))]
 struct Args {
@@ -121,9 +129,35 @@ struct Args {
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
     shader_param: Vec<(String, f64)>,
 
-    /// Encoding of the frames the server sends.
-    #[arg(long, value_enum, default_value_t = Encoding::Qoi)]
-    encoding: Encoding,
+    /// Encoding of the frames the server sends. Default: qoi, or linear when --format exr,
+    /// --tev, --exposure or --tonemap filmic need the radiance.
+    #[arg(long, value_enum)]
+    encoding: Option<Encoding>,
+
+    /// File format of the frames written to --out: png (8-bit sRGB after --exposure and
+    /// --tonemap) or exr (OpenEXR, linear RGB half floats, never tone-mapped or clipped).
+    #[arg(long, value_enum, default_value_t = FileFormat::Png)]
+    format: FileFormat,
+
+    /// Exposure in stops for PNG frames and the window: linear values are multiplied by
+    /// 2^EV before the tone curve (the window's - and = keys change it by half a stop).
+    /// EXR files and tev get the unscaled values.
+    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true, value_parser = parse_exposure)]
+    exposure: f32,
+
+    /// Tone curve for PNG frames and the window, after the exposure and before the sRGB
+    /// transfer: clip (values above 1 clip; at exposure 0 the server's own sRGB frames) or
+    /// filmic (the ACES filmic fit of Narkowicz 2016, x(2.51x+0.03)/(x(2.43x+0.59)+0.14):
+    /// highlights roll off, white at 7.2). The window's T key switches them.
+    #[arg(long, value_enum, default_value_t = ToneCurve::Clip)]
+    tonemap: ToneCurve,
+
+    /// Mirror every frame's linear RGB to the tev image viewer listening at HOST:PORT (tev's
+    /// default is 127.0.0.1:14158; a bare HOST gets that port), as pbrt-v4's
+    /// --display-server does. A tev that is absent or goes away only gets a warning: the
+    /// render goes on and the mirror reconnects when tev is back.
+    #[arg(long, value_name = "HOST:PORT", value_parser = edgepoint_viewer::tev::parse_addr)]
+    tev: Option<String>,
 
     /// Stop after N frames; 0 runs until Ctrl-C (or until the window is closed). Default:
     /// 300 frames when headless (about 10 s at 30 fps, so a forgotten run cannot fill the
@@ -131,7 +165,8 @@ struct Args {
     #[arg(long, value_name = "N")]
     frames: Option<u64>,
 
-    /// Write every frame as DIR/frame_00001.png ... and per-frame stats to DIR/stats.jsonl.
+    /// Write every frame as DIR/frame_00001.png (.exr with --format exr) ... and per-frame
+    /// stats to DIR/stats.jsonl.
     /// Headless runs write to ./edgepoint-frames when not given; with a window, only when given.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
@@ -211,6 +246,8 @@ enum Encoding {
     Jpeg,
     /// Raw 8-bit sRGB, width*height*3 bytes.
     Raw,
+    /// Linear RGB as half floats, LZ4-compressed (for EXR, tev, exposure and tone mapping).
+    Linear,
 }
 
 impl From<Encoding> for FrameEncoding {
@@ -220,6 +257,7 @@ impl From<Encoding> for FrameEncoding {
             Encoding::Png => FrameEncoding::Png,
             Encoding::Jpeg => FrameEncoding::Jpeg,
             Encoding::Raw => FrameEncoding::RawRgb8,
+            Encoding::Linear => FrameEncoding::LinearHalfLz4,
         }
     }
 }
@@ -235,6 +273,39 @@ fn parse_shader_param(s: &str) -> Result<(String, f64), String> {
         return Err(format!("value of '{k}' must be finite, got {v}"));
     }
     Ok((k.to_string(), v))
+}
+
+fn parse_exposure(s: &str) -> Result<f32, String> {
+    let v: f32 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !v.is_finite() || v.abs() > 64.0 {
+        return Err(format!("must be a number of stops in [-64, 64], got {s}"));
+    }
+    Ok(v)
+}
+
+impl Args {
+    fn look(&self) -> Look {
+        Look { exposure: self.exposure, curve: self.tonemap }
+    }
+
+    /// The frames' encoding: linear whenever an output needs the radiance.
+    fn frame_encoding(&self) -> Result<FrameEncoding> {
+        let need = if self.format == FileFormat::Exr {
+            Some("--format exr")
+        } else if self.tev.is_some() {
+            Some("--tev")
+        } else if !self.look().is_identity() {
+            Some("--exposure / --tonemap filmic")
+        } else {
+            None
+        };
+        match (self.encoding, need) {
+            (None, None) => Ok(FrameEncoding::Qoi),
+            (None, Some(_)) | (Some(Encoding::Linear), _) => Ok(FrameEncoding::LinearHalfLz4),
+            (Some(e), None) => Ok(e.into()),
+            (Some(e), Some(what)) => bail!("{what} needs linear frames: drop --encoding {e:?} (or give --encoding linear)"),
+        }
+    }
 }
 
 fn parse_positive_f64(s: &str) -> Result<f64, String> {
@@ -263,6 +334,7 @@ fn run(args: Args) -> Result<()> {
     // Read the scene and the camera path before starting anything: a wrong path fails at once.
     let scene = scene_source_from_arg_in(&args.scene, args.data_dir.as_deref())?;
     let plan = camera_plan(&args)?;
+    let encoding = args.frame_encoding()?;
     let mut recorder = args.record_path.as_deref().map(PathWriter::create).transpose()?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -323,7 +395,7 @@ fn run(args: Args) -> Result<()> {
         height: args.height,
         shader: args.shader.clone(),
         shader_params: args.shader_param.iter().cloned().collect(),
-        encoding: FrameEncoding::from(args.encoding) as i32,
+        encoding: encoding as i32,
         settings,
         camera: args.camera.map(|c| c.to_wire()),
     };
@@ -379,15 +451,23 @@ fn run(args: Args) -> Result<()> {
     } else {
         None
     };
+    let tev = args.tev.as_deref().map(|addr| TevMirror::start(addr, &tev_image_name(&args.scene)));
+    let linear = encoding == FrameEncoding::LinearHalfLz4;
     let result = match window {
-        Some(w) => run_window(&rt, w, client, &started, script, recorder, &args, stop_flag),
+        Some(w) => run_window(&rt, w, client, &started, script, recorder, &args, stop_flag, tev, linear),
         None => {
             let out = args.out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUT_DIR));
-            rt.block_on(run_headless(client, script, &mut recorder, &args, out, stop_rx))
+            rt.block_on(run_headless(client, script, &mut recorder, &args, out, stop_rx, tev.as_ref()))
         }
     };
     drop(cluster);
     result
+}
+
+/// The name frames have in tev: `edgepoint <scene>` (the file name of a scene file).
+fn tev_image_name(scene: &str) -> String {
+    let short = std::path::Path::new(scene).file_name().map_or(scene.into(), |n| n.to_string_lossy());
+    format!("edgepoint {short}")
 }
 
 /// What the camera flags ask for. `--orbit` with a --camera that places the camera is an
@@ -454,8 +534,10 @@ async fn run_headless(
     args: &Args,
     out: PathBuf,
     mut stop: watch::Receiver<bool>,
+    tev: Option<&TevMirror>,
 ) -> Result<()> {
-    let mut writer = HeadlessWriter::create(&out, args.stats_stdout)?;
+    let mut writer = HeadlessWriter::create(&out, args.stats_stdout)?.with_format(args.format);
+    let tone = ToneMapper::new(args.look());
     let target = args.frames.unwrap_or(DEFAULT_HEADLESS_FRAMES);
     tracing::info!("writing frames and stats.jsonl to {}", out.display());
     let sender = client.sender();
@@ -475,7 +557,13 @@ async fn run_headless(
             // Nothing here asks for picks.
             Some(Ok(Event::Picked(_))) => {}
             Some(Ok(Event::Frame(f))) => {
-                writer.write_frame(&f, received)?;
+                let t0 = Instant::now();
+                let decoded = decode_with(&f, &tone)?;
+                let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+                if let (Some(m), Some(lin)) = (tev, &decoded.linear) {
+                    m.offer(lin.clone());
+                }
+                writer.write_decoded(&f, &decoded, received, decode_ms)?;
                 record(recorder, &f)?;
                 if target > 0 && writer.frames_written() >= target {
                     break;
@@ -494,7 +582,8 @@ async fn run_headless(
     Ok(())
 }
 
-// The window needs the session, its start, the script, the recorder and the flags.
+// The window needs the session, its start, the script, the recorder, the flags and the
+// outputs.
 #[allow(clippy::too_many_arguments)]
 fn run_window(
     rt: &tokio::runtime::Runtime,
@@ -505,11 +594,14 @@ fn run_window(
     mut recorder: Option<PathWriter>,
     args: &Args,
     stop: Arc<AtomicBool>,
+    tev: Option<TevMirror>,
+    linear: bool,
 ) -> Result<()> {
     let mut writer = match &args.out {
-        Some(dir) => Some(HeadlessWriter::create(dir, args.stats_stdout)?),
+        Some(dir) => Some(HeadlessWriter::create(dir, args.stats_stdout)?.with_format(args.format)),
         None => None,
     };
+    let look = Arc::new(LookControl::new(args.look(), linear));
     let sender = client.sender();
     // Unbounded, so a pick answer or progress is never lost; decoded frames are skipped
     // while two wait (the window shows only the newest).
@@ -523,6 +615,7 @@ fn run_window(
         scripted_camera: script.drives_camera(),
         scene: args.scene.clone(),
         frames_queued: queued.clone(),
+        look: look.clone(),
     };
     let script = Arc::new(Mutex::new(script));
     let target = args.frames.unwrap_or(0);
@@ -531,6 +624,7 @@ fn run_window(
         let queued = queued.clone();
         rt.spawn(async move {
             let mut meter = FrameMeter::new();
+            let mut tone = ToneMapper::new(look.get());
             while let Some(ev) = client.next_event().await {
                 let received = Instant::now();
                 match ev? {
@@ -544,16 +638,21 @@ fn run_window(
                     }
                     Event::Frame(f) => {
                         let t0 = Instant::now();
-                        let img = decode_frame(&f)?;
+                        tone.set_look(look.get());
+                        let decoded = decode_with(&f, &tone)?;
                         let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+                        if let (Some(m), Some(lin)) = (&tev, &decoded.linear) {
+                            m.offer(lin.clone());
+                        }
+                        let img = &decoded.image;
                         record(&mut recorder, &f)?;
                         let stats = match writer.as_mut() {
-                            Some(w) => w.write_decoded(&f, &img, received, decode_ms)?,
+                            Some(w) => w.write_decoded(&f, &decoded, received, decode_ms)?,
                             None => FrameStats::new(&f, meter.arrive(received)),
                         };
                         if queued.load(Ordering::Relaxed) < 2 {
                             let mut pixels = Vec::with_capacity(img.len() / 3);
-                            to_0rgb(&img, &mut pixels);
+                            to_0rgb(img, &mut pixels);
                             queued.fetch_add(1, Ordering::Relaxed);
                             let _ = to_window.send(ToWindow::Frame(ShownFrame {
                                 width: f.width,

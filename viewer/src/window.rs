@@ -33,6 +33,8 @@ Window controls:
   O                    next overlay: none, edges, classes, samples
   B                    reconstruction: edge-and-point / Render Cache
   Space                pause / resume the server's frames
+  - / =                exposure down / up by half a stop (linear frames)
+  T                    tone curve: clip / filmic
   P                    screenshot (PNG; its path is printed)
   Tab                  stats overlay on / off
   H or F1              this help
@@ -101,7 +103,12 @@ pub struct WindowSetup {
     pub scene: String,
     /// Decoded frames sent and not yet taken (the window counts down as it takes them).
     pub frames_queued: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    /// Exposure and tone curve, which the frame receiver applies to linear frames.
+    pub look: std::sync::Arc<crate::tonemap::LookControl>,
 }
+
+/// Exposure change per key press, in stops.
+const EXPOSURE_STEP: f32 = 0.5;
 
 /// Orbit speed of the arrow keys.
 const KEY_ORBIT_DEGREES_PER_SECOND: f32 = 90.0;
@@ -415,6 +422,9 @@ impl Ui {
                     self.send_settings(pb::Settings { paused: self.paused, set_paused: true, ..Default::default() });
                     self.notice(if self.paused { "paused".into() } else { "resumed".into() });
                 }
+                Key::Minus | Key::NumPadMinus => self.change_look(|l| l.exposure -= EXPOSURE_STEP),
+                Key::Equal | Key::NumPadPlus => self.change_look(|l| l.exposure += EXPOSURE_STEP),
+                Key::T => self.change_look(|l| l.curve = l.curve.toggled()),
                 Key::P => self.screenshot(),
                 Key::Tab => self.show_stats = !self.show_stats,
                 Key::H | Key::F1 => self.show_help = !self.show_help,
@@ -428,6 +438,16 @@ impl Ui {
             return true;
         }
         false
+    }
+
+    /// Exposure and tone curve apply to linear frames: the first change asks the server for
+    /// them (frames already on their way still show as they were rendered).
+    fn change_look(&mut self, change: impl FnOnce(&mut crate::tonemap::Look)) {
+        let (look, switch) = self.setup.look.adjust(change);
+        if switch {
+            self.send_settings(pb::Settings { encoding: pb::FrameEncoding::LinearHalfLz4 as i32, ..Default::default() });
+        }
+        self.notice(format!("display: {}", look.describe()));
     }
 
     fn screenshot(&mut self) {
@@ -557,7 +577,10 @@ mod tests {
     }
 
     fn ui() -> Ui {
-        let (sender, _rx) = SessionSender::detached();
+        ui_with(SessionSender::detached().0, false)
+    }
+
+    fn ui_with(sender: SessionSender, linear: bool) -> Ui {
         Ui::new(WindowSetup {
             sender,
             home: None,
@@ -566,7 +589,29 @@ mod tests {
             scripted_camera: false,
             scene: "cornell".into(),
             frames_queued: Default::default(),
+            look: std::sync::Arc::new(crate::tonemap::LookControl::new(Default::default(), linear)),
         })
+    }
+
+    /// The exposure keys change the shared look; the first change of a session with sRGB
+    /// frames asks for linear frames, once; a session that has them is never asked.
+    #[test]
+    fn exposure_keys_ask_for_linear_frames_once() {
+        use crate::tonemap::ToneCurve;
+        let (sender, mut rx) = SessionSender::detached();
+        let mut ui = ui_with(sender, false);
+        ui.change_look(|l| l.exposure += EXPOSURE_STEP);
+        ui.change_look(|l| l.curve = l.curve.toggled());
+        let look = ui.setup.look.get();
+        assert_eq!((look.exposure, look.curve), (0.5, ToneCurve::Filmic));
+        let msg = rx.try_recv().unwrap().msg.unwrap();
+        let pb::viewer_msg::Msg::Settings(s) = msg else { panic!("{msg:?}") };
+        assert_eq!(s.encoding, pb::FrameEncoding::LinearHalfLz4 as i32);
+        assert!(rx.try_recv().is_err(), "asked once");
+        let (sender, mut rx) = SessionSender::detached();
+        let mut ui = ui_with(sender, true);
+        ui.change_look(|l| l.exposure -= EXPOSURE_STEP);
+        assert!(rx.try_recv().is_err());
     }
 
     fn frame(has_content: bool) -> ShownFrame {

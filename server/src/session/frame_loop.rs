@@ -464,9 +464,19 @@ impl FrameLoop {
                     Err(e) => self.out.reject(Code::InvalidArgument, format!("object move ignored: {e}")),
                 },
                 Input::Settings(s) => match self.settings.with(s) {
+                    Ok(_) if pb::FrameEncoding::try_from(s.encoding).is_err() => self.out.reject(
+                        Code::InvalidArgument,
+                        format!("settings ignored: settings.encoding {} is not a known FrameEncoding (0 to keep)", s.encoding),
+                    ),
                     Ok(new) => match self.regrant(&new) {
                         Ok(()) => {
                             self.settings = new;
+                            // A viewer switches to linear frames when it starts needing them
+                            // (exposure keys, tev); `UNSPECIFIED` keeps the current encoding.
+                            match pb::FrameEncoding::try_from(s.encoding) {
+                                Ok(pb::FrameEncoding::Unspecified) | Err(_) => {}
+                                Ok(e) => self.encoding = e,
+                            }
                             let pixels = self.width as usize * self.height as usize;
                             self.ring.reserve(ring_capacity(&new, pixels));
                         }
