@@ -379,7 +379,7 @@ fn each_obj_object_is_welded_from_its_own_vertices() {
 /// materials) in both.
 #[test]
 fn mtllib_paths_stay_inside_the_objs_directory() {
-    use edgepoint_scene::load::{mtllib_names, mtllib_path};
+    use edgepoint_scene::load::{mtllib_names, reference_path as mtllib_path};
     let dir = std::env::temp_dir().join(format!("edgepoint-mtllib-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(dir.join("scene/mat")).unwrap();
