@@ -10,7 +10,7 @@ pub struct LoadArgs {
     /// A .ply / .obj file (e.g. ../shared/data/dragon/dragon_vrip.ply); the same as --scene PATH.
     #[arg(long, conflicts_with = "scene")]
     pub mesh: Option<std::path::PathBuf>,
-    /// A built-in scene name or a .ply / .obj file [default: cornell].
+    /// A built-in scene name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz) [default: cornell].
     #[arg(long)]
     pub scene: Option<String>,
     /// Repeat the measurement this many times and report the median.
