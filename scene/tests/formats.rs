@@ -194,9 +194,10 @@ fn hand_written_mitsuba_scene() {
     let normals = ball.mesh.corners.normals.as_ref().unwrap();
     for (f, t) in ball.mesh.triangles.iter().enumerate() {
         for k in 0..3 {
-            let p = ball.mesh.positions[t[k] as usize];
+            let p = ball.transform.transform_point3(ball.mesh.positions[t[k] as usize]);
             assert!(((p - Vec3::new(-1.0, 0.5, 0.0)).length() - 0.5).abs() < 1e-5);
-            assert!(close(normals[f][k], (p - Vec3::new(-1.0, 0.5, 0.0)).normalize(), 1e-4));
+            let n = ball.transform.transform_vector3(normals[f][k]).normalize();
+            assert!(close(n, (p - Vec3::new(-1.0, 0.5, 0.0)).normalize(), 1e-4));
         }
     }
     // Lights: the lamp (scale, rotate +90° about x: facing -y, at y = 3), a point, a spot.
@@ -210,6 +211,21 @@ fn hand_written_mitsuba_scene() {
     assert!(close(position, Vec3::new(0.0, 4.0, 0.0), 1e-6) && close(direction, -Vec3::Y, 1e-6));
     assert!((cos_inner - 20f32.to_radians().cos()).abs() < 1e-6 && (cos_outer - 30f32.to_radians().cos()).abs() < 1e-6);
     assert_eq!(s.ambient, Vec3::ZERO);
+}
+
+#[test]
+fn repeated_shapes_share_one_mesh() {
+    let mut xml = String::from("<scene>");
+    for i in 0..200 {
+        xml.push_str(&format!("<shape type=\"sphere\"><float name=\"radius\" value=\"{}\"/></shape>", 1 + i));
+    }
+    xml.push_str("<shape type=\"sphere\"><emitter type=\"area\"><rgb name=\"radiance\" value=\"2\"/></emitter></shape></scene>");
+    let s = load(&[nb("many.xml", xml.as_bytes())]).unwrap();
+    assert_eq!(s.objects.len(), 201, "the spheres; no floor: the file brings a light");
+    let first = &s.objects[0].mesh;
+    assert!(s.objects[..201].iter().all(|o| std::sync::Arc::ptr_eq(&o.mesh, first)));
+    // The emitting unit sphere: one point light of the same power, Φ = L π 4π r² = 4π I.
+    assert_eq!(s.lights, vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::splat(2.0 * std::f32::consts::PI) }]);
 }
 
 #[test]

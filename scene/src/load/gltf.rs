@@ -21,6 +21,7 @@ use super::emitters::area_lights;
 use super::files::{find, Reference};
 use super::{stage_meshes, FileView, NamedBytes};
 use crate::{Bsdf, Camera, Corners, Light, Material, Mesh, Object, Progress, Scene, SceneError, Texture};
+use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::{khr_lights_punctual::Kind as LightKind, mesh::Mode, Document, Gltf};
 use base64::Engine;
 use glam::{Affine3A, Mat4, Vec2, Vec3};
@@ -35,8 +36,39 @@ const MAX_TEXTURE_SIDE: u32 = 4096;
 /// Most elements one accessor may have.
 const MAX_ACCESSOR_COUNT: usize = 1 << 28;
 
+/// Parses and validates a glTF. The crate's validator indexes the accessor list with a
+/// primitive's POSITION index unchecked, so that index is checked first (a fuzzed file
+/// made it panic).
 fn parse(name: &str, data: &[u8]) -> Result<Gltf, SceneError> {
-    Gltf::from_slice(data).map_err(|e| match e {
+    use ::gltf::json::validation::Validate;
+    let g = Gltf::from_slice_without_validation(data).map_err(|e| gltf_error(name, e))?;
+    let json = g.as_json();
+    for (i, m) in json.meshes.iter().enumerate() {
+        for (j, p) in m.primitives.iter().enumerate() {
+            for (sem, acc) in &p.attributes {
+                if acc.value() >= json.accessors.len() {
+                    let sem = match sem {
+                        ::gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        _ => "?".into(),
+                    };
+                    return Err(SceneError::file(
+                        name,
+                        format!("meshes[{i}].primitives[{j}].attributes.{sem}: accessor {} does not exist ({} accessors)", acc.value(), json.accessors.len()),
+                    ));
+                }
+            }
+        }
+    }
+    let mut errors = Vec::new();
+    json.validate(json, ::gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
+    if !errors.is_empty() {
+        return Err(gltf_error(name, ::gltf::Error::Validation(errors)));
+    }
+    Ok(g)
+}
+
+fn gltf_error(name: &str, e: ::gltf::Error) -> SceneError {
+    match e {
         ::gltf::Error::Deserialize(j) => SceneError::line(name, j.line(), format!("JSON: {j}")),
         ::gltf::Error::Validation(errs) => {
             let list: Vec<String> = errs.iter().take(5).map(|(path, err)| format!("{path}: {err}")).collect();
@@ -44,7 +76,7 @@ fn parse(name: &str, data: &[u8]) -> Result<Gltf, SceneError> {
             SceneError::file(name, format!("invalid glTF: {}{more}", list.join("; ")))
         }
         other => SceneError::file(name, format!("invalid glTF: {other}")),
-    })
+    }
 }
 
 /// `%XX` escapes of a URI decoded (glTF URIs are percent-encoded file names).
@@ -129,7 +161,11 @@ fn buffers(name: &str, g: &Gltf, files: &[NamedBytes]) -> Result<Vec<Vec<u8>>, S
 
 /// Whether an accessor can be read from `buffers` without trusting its count: a dense
 /// accessor of at least one element whose every byte is in its buffer view and buffer.
-fn readable(acc: &::gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
+fn readable(acc: &::gltf::Accessor, buffers: &[Vec<u8>], types: &[DataType], dims: Dimensions) -> Result<(), String> {
+    // The reader assumes these (it reaches `unreachable!` or misreads otherwise).
+    if !types.contains(&acc.data_type()) || acc.dimensions() != dims {
+        return Err(format!("component type {:?} {:?} where {types:?} {dims:?} is required", acc.data_type(), acc.dimensions()));
+    }
     if acc.sparse().is_some() {
         return Err("sparse accessors are not supported".into());
     }
@@ -370,6 +406,71 @@ fn primitive_triangles(mode: Mode, idx: &[u32]) -> Option<Vec<[u32; 3]>> {
     })
 }
 
+/// The mesh of one triangle primitive (`None`, with a warning, for points and lines or a
+/// primitive without positions).
+fn primitive_mesh(
+    name: &str,
+    path: &str,
+    prim: &::gltf::Primitive,
+    buffers: &[Vec<u8>],
+    progress: &dyn Progress,
+) -> Result<Option<Mesh>, SceneError> {
+    let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let Some(pos_acc) = prim.get(&::gltf::Semantic::Positions) else {
+        tracing::warn!("{name}: {path}: no POSITION: skipped");
+        return Ok(None);
+    };
+    if let Err(e) = readable(&pos_acc, buffers, &[DataType::F32], Dimensions::Vec3) {
+        return Err(SceneError::file(name, format!("{path}.attributes.POSITION: {e}")));
+    }
+    let positions: Vec<Vec3> = reader.read_positions().map(|p| p.map(Vec3::from).collect()).unwrap_or_default();
+    for (i, p) in positions.iter().enumerate() {
+        crate::limits::check_vec(&format!("vertex {i}"), *p, crate::limits::MAX_COORDINATE)
+            .map_err(|e| SceneError::file(name, format!("{path}.attributes.POSITION: {e}")))?;
+    }
+    let indices: Vec<u32> = match prim.indices() {
+        Some(acc) => {
+            readable(&acc, buffers, &[DataType::U8, DataType::U16, DataType::U32], Dimensions::Scalar)
+                .map_err(|e| SceneError::file(name, format!("{path}.indices: {e}")))?;
+            reader.read_indices().map(|i| i.into_u32().collect()).unwrap_or_default()
+        }
+        None => (0..positions.len() as u32).collect(),
+    };
+    if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+        return Err(SceneError::file(name, format!("{path}.indices: index {bad} but only {} vertices", positions.len())));
+    }
+    let Some(tris) = primitive_triangles(prim.mode(), &indices) else {
+        tracing::warn!("{name}: {path}: mode {:?} (points or lines) is not a surface: skipped", prim.mode());
+        return Ok(None);
+    };
+    let attr = |sem: ::gltf::Semantic, what: &str, types: &[DataType], dims: Dimensions| -> Result<bool, SceneError> {
+        match prim.get(&sem) {
+            None => Ok(false),
+            Some(acc) => match readable(&acc, buffers, types, dims) {
+                Ok(()) if acc.count() == positions.len() => Ok(true),
+                Ok(()) => Err(SceneError::file(name, format!("{path}.attributes.{what}: {} entries for {} vertices", acc.count(), positions.len()))),
+                Err(e) => Err(SceneError::file(name, format!("{path}.attributes.{what}: {e}"))),
+            },
+        }
+    };
+    let normals: Option<Vec<Vec3>> = if attr(::gltf::Semantic::Normals, "NORMAL", &[DataType::F32], Dimensions::Vec3)? {
+        reader.read_normals().map(|n| n.map(|v| Vec3::from(v).normalize_or_zero()).collect())
+    } else {
+        None
+    };
+    let uvs: Option<Vec<Vec2>> = if attr(::gltf::Semantic::TexCoords(0), "TEXCOORD_0", &[DataType::F32, DataType::U8, DataType::U16], Dimensions::Vec2)? {
+        reader.read_tex_coords(0).map(|t| t.into_f32().map(Vec2::from).collect())
+    } else {
+        None
+    };
+    let corners = Corners {
+        normals: normals.map(|n| tris.iter().map(|t| t.map(|i| n[i as usize])).collect()),
+        uvs: uvs.map(|u| tris.iter().map(|t| t.map(|i| u[i as usize])).collect()),
+    };
+    let mesh = Mesh::from_triangles_with_corners(positions, tris, corners, progress);
+    Ok((!mesh.triangles.is_empty()).then_some(mesh))
+}
+
 /// Loads a glTF 2.0 scene; `files` are the scene's files (main first).
 pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene, SceneError> {
     let name = main.name.as_str();
@@ -382,6 +483,7 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
     let mut objects = Vec::new();
     let mut lights = Vec::new();
     let mut directional = Vec::new();
+    let mut prim_meshes: HashMap<(usize, usize), Option<Arc<Mesh>>> = HashMap::new();
     for (node, m) in &nodes {
         let transform = Affine3A::from_mat4(*m);
         if let Some(light) = node.light() {
@@ -417,57 +519,17 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
         crate::limits::check_affine(&transform).map_err(|e| SceneError::file(name, format!("nodes[{}]: {e}", node.index())))?;
         for prim in mesh.primitives() {
             let path = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
-            let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-            let Some(pos_acc) = prim.get(&::gltf::Semantic::Positions) else {
-                tracing::warn!("{name}: {path}: no POSITION: skipped");
-                continue;
-            };
-            if let Err(e) = readable(&pos_acc, &buffers) {
-                return Err(SceneError::file(name, format!("{path}.attributes.POSITION: {e}")));
-            }
-            let positions: Vec<Vec3> = reader.read_positions().map(|p| p.map(Vec3::from).collect()).unwrap_or_default();
-            for (i, p) in positions.iter().enumerate() {
-                crate::limits::check_vec(&format!("vertex {i}"), *p, crate::limits::MAX_COORDINATE)
-                    .map_err(|e| SceneError::file(name, format!("{path}.attributes.POSITION: {e}")))?;
-            }
-            let indices: Vec<u32> = match prim.indices() {
-                Some(acc) => {
-                    readable(&acc, &buffers).map_err(|e| SceneError::file(name, format!("{path}.indices: {e}")))?;
-                    reader.read_indices().map(|i| i.into_u32().collect()).unwrap_or_default()
-                }
-                None => (0..positions.len() as u32).collect(),
-            };
-            if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                return Err(SceneError::file(name, format!("{path}.indices: index {bad} but only {} vertices", positions.len())));
-            }
-            let Some(tris) = primitive_triangles(prim.mode(), &indices) else {
-                tracing::warn!("{name}: {path}: mode {:?} (points or lines) is not a surface: skipped", prim.mode());
-                continue;
-            };
-            let attr = |sem: ::gltf::Semantic, what: &str| -> Result<bool, SceneError> {
-                match prim.get(&sem) {
-                    None => Ok(false),
-                    Some(acc) => match readable(&acc, &buffers) {
-                        Ok(()) if acc.count() == positions.len() => Ok(true),
-                        Ok(()) => Err(SceneError::file(name, format!("{path}.attributes.{what}: {} entries for {} vertices", acc.count(), positions.len()))),
-                        Err(e) => Err(SceneError::file(name, format!("{path}.attributes.{what}: {e}"))),
-                    },
+            // A mesh used by several nodes is built once and shared.
+            let key = (mesh.index(), prim.index());
+            let mesh_data = match prim_meshes.get(&key) {
+                Some(m) => m.clone(),
+                None => {
+                    let m = primitive_mesh(name, &path, &prim, &buffers, progress)?.map(Arc::new);
+                    prim_meshes.insert(key, m.clone());
+                    m
                 }
             };
-            let normals: Option<Vec<Vec3>> = if attr(::gltf::Semantic::Normals, "NORMAL")? {
-                reader.read_normals().map(|n| n.map(|v| Vec3::from(v).normalize_or_zero()).collect())
-            } else {
-                None
-            };
-            let uvs: Option<Vec<Vec2>> = if attr(::gltf::Semantic::TexCoords(0), "TEXCOORD_0")? {
-                reader.read_tex_coords(0).map(|t| t.into_f32().map(Vec2::from).collect())
-            } else {
-                None
-            };
-            let corners = Corners {
-                normals: normals.map(|n| tris.iter().map(|t| t.map(|i| n[i as usize])).collect()),
-                uvs: uvs.map(|u| tris.iter().map(|t| t.map(|i| u[i as usize])).collect()),
-            };
+            let Some(mesh_data) = mesh_data else { continue };
             let material = match materials.get(&prim.material().index()) {
                 Some(m) => m.clone(),
                 None => {
@@ -476,10 +538,6 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
                     m
                 }
             };
-            let mesh_data = Mesh::from_triangles_with_corners(positions, tris, corners, progress);
-            if mesh_data.triangles.is_empty() {
-                continue;
-            }
             if material.emission.max_element() > 0.0 {
                 let world: Vec<[Vec3; 3]> =
                     (0..mesh_data.triangles.len()).map(|f| mesh_data.triangle(f).map(|p| transform.transform_point3(p))).collect();
@@ -491,7 +549,7 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
                 (None, Some(m)) => format!("{m}:{}", prim.index()),
                 (None, None) => path.clone(),
             };
-            objects.push(Object { name: obj_name, mesh: Arc::new(mesh_data), material, transform });
+            objects.push(Object { name: obj_name, mesh: mesh_data, material, transform });
         }
     }
     if objects.is_empty() {

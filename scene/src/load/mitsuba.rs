@@ -550,13 +550,47 @@ impl<'a, 'input> Ctx<'a, 'input> {
         }
     }
 
-    /// The mesh of a shape in its object space, or `None` (with a warning) for a shape type
-    /// that is not supported.
-    fn shape_mesh(&self, s: Node<'a, 'input>, ty: &str, progress: &dyn Progress) -> Result<Option<Mesh>, SceneError> {
+    /// The mesh of a shape and the transform from its mesh to the shape's object space (a
+    /// sphere's centre and radius), or `None` (with a warning) for a shape type that is not
+    /// supported. Meshes are shared through `cache`: every sphere of a scene is one unit
+    /// sphere, a mesh file used by several shapes is read once, so a small XML cannot
+    /// multiply geometry (or memory) by repeating a shape.
+    fn shape_mesh(
+        &self,
+        s: Node<'a, 'input>,
+        ty: &str,
+        cache: &mut HashMap<String, Arc<Mesh>>,
+        progress: &dyn Progress,
+    ) -> Result<Option<(Arc<Mesh>, DMat4)>, SceneError> {
         use crate::builtin::shapes;
-        let mesh = match ty {
+        let flip = self.boolean(s, "flip_normals")?;
+        let mut pre = DMat4::IDENTITY;
+        let key = match ty {
             "obj" | "ply" => {
                 let file = self.string(s, "filename")?.ok_or_else(|| self.err(s, format!("{ty} shape needs a filename")))?;
+                format!("{ty} {file} {} {flip}", self.boolean(s, "face_normals")?)
+            }
+            "sphere" => {
+                let centre = self.point(s, "center", DVec3::ZERO)?;
+                let r = self.float(s, "radius", 1.0)?;
+                if !(r > 0.0) {
+                    return Err(self.err(s, format!("sphere radius must be positive, got {r}")));
+                }
+                pre = DMat4::from_translation(centre) * DMat4::from_scale(DVec3::splat(r));
+                format!("sphere {flip}")
+            }
+            "rectangle" | "disk" | "cube" => format!("{ty} {flip}"),
+            other => {
+                self.warn(s, format!("shape type `{other}` is not supported: skipped (supported: obj, ply, rectangle, cube, sphere, disk)"));
+                return Ok(None);
+            }
+        };
+        if let Some(m) = cache.get(&key) {
+            return Ok(Some((m.clone(), pre)));
+        }
+        let mut mesh = match ty {
+            "obj" | "ply" => {
+                let file = self.string(s, "filename")?.unwrap_or_default();
                 let f = find(self.files, &file).ok_or_else(|| {
                     self.err(s, format!("mesh file {file} was not sent with the scene (is it next to the XML file, inside its directory?)"))
                 })?;
@@ -573,35 +607,31 @@ impl<'a, 'input> Ctx<'a, 'input> {
                 Mesh::from_triangles_with_corners(p, vec![[0, 1, 2], [0, 2, 3]], corners, &crate::NoProgress)
             }
             "disk" => {
-                let p: Vec<Vec3> = (0..64).map(|i| {
-                    let a = std::f32::consts::TAU * i as f32 / 64.0;
-                    Vec3::new(a.cos(), a.sin(), 0.0)
-                }).collect();
+                let p: Vec<Vec3> = (0..64)
+                    .map(|i| {
+                        let a = std::f32::consts::TAU * i as f32 / 64.0;
+                        Vec3::new(a.cos(), a.sin(), 0.0)
+                    })
+                    .collect();
                 shapes::polygon(&p)
             }
             "cube" => shapes::cuboid(Vec3::splat(-1.0), Vec3::ONE),
-            "sphere" => {
-                let centre = self.point(s, "center", DVec3::ZERO)?.as_vec3();
-                let r = self.float(s, "radius", 1.0)? as f32;
-                if !(r > 0.0) {
-                    return Err(self.err(s, format!("sphere radius must be positive, got {r}")));
-                }
-                let unit = shapes::sphere(1.0, 64, 32);
+            _ => {
+                let unit = shapes::sphere(1.0, 48, 24);
                 // Smooth shading: the unit sphere's normal at a corner is its position.
                 let normals = unit.triangles.iter().map(|t| t.map(|i| unit.positions[i as usize].normalize())).collect();
-                let positions = unit.positions.iter().map(|p| centre + *p * r).collect();
-                Mesh::from_triangles_with_corners(positions, unit.triangles.clone(), Corners { normals: Some(normals), uvs: None }, &crate::NoProgress)
-            }
-            other => {
-                self.warn(s, format!("shape type `{other}` is not supported: skipped (supported: obj, ply, rectangle, cube, sphere, disk)"));
-                return Ok(None);
+                Mesh::from_triangles_with_corners(unit.positions.clone(), unit.triangles.clone(), Corners { normals: Some(normals), uvs: None }, &crate::NoProgress)
             }
         };
-        let mut mesh = mesh;
-        if self.boolean(s, "flip_normals")? {
+        if flip {
             mesh.flip();
+            if let Some(n) = &mut mesh.corners.normals {
+                n.iter_mut().flatten().for_each(|v| *v = -*v);
+            }
         }
-        Ok(Some(mesh))
+        let mesh = Arc::new(mesh);
+        cache.insert(key, mesh.clone());
+        Ok(Some((mesh, pre)))
     }
 
     /// An emitter's radiance or intensity property.
@@ -710,6 +740,7 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
     // Directional lights are placed once every shape is known (they sit outside them all).
     let mut directional: Vec<(Vec3, Vec3)> = Vec::new();
     let mut shape_count = 0;
+    let mut meshes: HashMap<String, Arc<Mesh>> = HashMap::new();
     for n in root.children().filter(|n| n.is_element()) {
         match n.tag_name().name() {
             "default" | "bsdf" | "texture" | "spectrum" | "rgb" | "sensor" => {}
@@ -722,8 +753,8 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
             "shape" => {
                 let ty = ctx.need(n, "type")?;
                 shape_count += 1;
-                let Some(mesh) = ctx.shape_mesh(n, &ty, progress)? else { continue };
-                let m = ctx.to_world(n)?;
+                let Some((mesh, pre)) = ctx.shape_mesh(n, &ty, &mut meshes, progress)? else { continue };
+                let m = ctx.to_world(n)? * pre;
                 let transform = affine(&m);
                 crate::limits::check_affine(&transform).map_err(|e| ctx.err(n, format!("to_world: {e}")))?;
                 let mut material = ctx.shape_material(n)?;
@@ -733,9 +764,22 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
                         ctx.warn(e, format!("emitter `{ety}` on a shape is not supported: treated as an area emitter"));
                     }
                     let radiance = ctx.emitted(e, "radiance")?;
-                    let world: Vec<[Vec3; 3]> = (0..mesh.triangles.len()).map(|f| mesh.triangle(f).map(|p| transform.transform_point3(p))).collect();
-                    let what = format!("{}:{}", ctx.name, ctx.line(n));
-                    lights.extend(area_lights(&what, &world, radiance));
+                    if ty == "sphere" {
+                        // A curved emitter would be one light per facet: the nearest light is
+                        // a point at the centre with the same power (Φ = L π · 4π r²).
+                        let r = m.transform_vector3(DVec3::X).length() as f32;
+                        let position = m.transform_point3(DVec3::ZERO).as_vec3();
+                        ctx.warn(e, "an emitting sphere is approximated by a point light of the same power at its centre");
+                        lights.push(Light::Point { position, intensity: radiance * std::f32::consts::PI * r * r });
+                    } else {
+                        let world: Vec<[Vec3; 3]> = (0..mesh.triangles.len()).map(|f| mesh.triangle(f).map(|p| transform.transform_point3(p))).collect();
+                        let what = format!("{}:{}", ctx.name, ctx.line(n));
+                        let made = area_lights(&what, &world, radiance);
+                        if made.len() > 64 {
+                            ctx.warn(e, format!("this emitter makes {} area lights (one per flat convex patch), each costing shadow rays per sample", made.len()));
+                        }
+                        lights.extend(made);
+                    }
                     material.emission = radiance;
                 }
                 let name = match (ctx.attr(n, "id")?, ctx.string(n, "filename")?) {
@@ -743,7 +787,7 @@ pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) ->
                     (None, Some(f)) => super::stem(&f),
                     (None, None) => format!("{ty} {shape_count}"),
                 };
-                objects.push(Object { name, mesh: Arc::new(mesh), material, transform });
+                objects.push(Object { name, mesh, material, transform });
             }
             "emitter" => {
                 let ty = ctx.need(n, "type")?;
