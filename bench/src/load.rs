@@ -124,20 +124,7 @@ fn format_files(name: &str, ply: &[u8], positions: &[glam::Vec3], triangles: &[[
             triangles.len() * 3
         )
     };
-    let mut json = gltf(None).into_bytes();
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    let mut glb = Vec::with_capacity(28 + json.len() + bin.len());
-    glb.extend(b"glTF");
-    glb.extend(2u32.to_le_bytes());
-    glb.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
-    glb.extend((json.len() as u32).to_le_bytes());
-    glb.extend(b"JSON");
-    glb.extend(&json);
-    glb.extend((bin.len() as u32).to_le_bytes());
-    glb.extend(b"BIN\0");
-    glb.extend(&bin);
+    let glb = edgepoint_scene::load::write_glb(gltf(None).as_bytes(), &bin);
     let xml = format!(r#"<scene version="3.0.0"><shape type="ply"><string name="filename" value="{name}"/></shape></scene>"#);
     vec![
         ("ply", vec![nb(name, ply.to_vec())]),

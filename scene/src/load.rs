@@ -14,6 +14,7 @@ pub mod spectrum;
 mod stage;
 
 pub use files::{gather, reference_path, references, Reference};
+pub use gltf::write_glb;
 pub use obj::mtllib_names;
 pub use stage::{stage_meshes, STAGED_AMBIENT};
 

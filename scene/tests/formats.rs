@@ -6,17 +6,8 @@ use edgepoint_scene::load::{self, file_view, gather, load_files, load_path, spec
 use edgepoint_scene::{Bsdf, Light, NoProgress, Scene, SceneError};
 use glam::{Vec2, Vec3};
 use std::io::Write;
-use std::path::PathBuf;
-
-fn data(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipping: {} not found", p.display());
-        None
-    }
-}
+mod common;
+use common::data;
 
 fn nb(name: &str, data: &[u8]) -> NamedBytes {
     NamedBytes { name: name.into(), data: data.to_vec() }
@@ -340,8 +331,8 @@ fn check_gltf_scene(s: &Scene) {
     assert_eq!(c.normals.as_ref().unwrap()[0], [Vec3::Z; 3]);
     // UVs follow their corners: vertex 1 (1, 0, 0) has UV (1, 1).
     let t0 = wall.mesh.triangles[0];
-    for k in 0..3 {
-        let pos = wall.mesh.positions[t0[k] as usize];
+    for (k, &v) in t0.iter().enumerate() {
+        let pos = wall.mesh.positions[v as usize];
         let uv = c.uvs.as_ref().unwrap()[0][k];
         assert_eq!(uv, Vec2::new(pos.x, 1.0 - pos.y), "corner {k} at {pos}");
     }
@@ -392,20 +383,7 @@ fn gltf_with_an_external_buffer_and_as_glb() {
     let e = load(&[nb("scene.gltf", json.as_bytes())]).unwrap_err().to_string();
     assert!(e.contains("buffers[0]") && e.contains("quad data.bin") && e.contains("not sent"), "{e}");
     // The same as a GLB: JSON chunk + BIN chunk.
-    let mut j = gltf_json(None, buf.len(), "").into_bytes();
-    while j.len() % 4 != 0 {
-        j.push(b' ');
-    }
-    let mut glb = Vec::new();
-    glb.extend(b"glTF");
-    glb.extend(2u32.to_le_bytes());
-    glb.extend(((12 + 8 + j.len() + 8 + buf.len()) as u32).to_le_bytes());
-    glb.extend((j.len() as u32).to_le_bytes());
-    glb.extend(b"JSON");
-    glb.extend(&j);
-    glb.extend((buf.len() as u32).to_le_bytes());
-    glb.extend(b"BIN\0");
-    glb.extend(&buf);
+    let glb = load::write_glb(gltf_json(None, buf.len(), "").as_bytes(), &buf);
     check_gltf_scene(&load(&[nb("scene.glb", &glb)]).unwrap());
     // And gzipped.
     check_gltf_scene(&load(&[nb("scene.glb.gz", &gz(&glb))]).unwrap());

@@ -1,17 +1,8 @@
 //! PLY / OBJ loaders on the shared real meshes and on malformed input.
 use edgepoint_scene::load::{load_files, load_path, NamedBytes};
 use edgepoint_scene::{NoProgress, Scene, SceneError};
-use std::path::PathBuf;
-
-fn data(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipping: {} not found", p.display());
-        None
-    }
-}
+mod common;
+use common::data;
 
 fn load(name: &str, bytes: &[u8]) -> Result<Scene, SceneError> {
     load_files(&[NamedBytes { name: name.into(), data: bytes.to_vec() }], &NoProgress)

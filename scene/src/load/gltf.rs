@@ -102,6 +102,27 @@ fn is_file_uri(uri: &str) -> bool {
     !uri.starts_with("data:") && !uri.contains("://")
 }
 
+/// A GLB container of `json` and the binary chunk `bin` (JSON padded with spaces, BIN
+/// with zeros, to 4 bytes, as the format requires). For tests and benchmarks that write
+/// scenes.
+pub fn write_glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
+    let pad = |n: usize| (4 - n % 4) % 4;
+    let (jl, bl) = (json.len() + pad(json.len()), bin.len() + pad(bin.len()));
+    let mut out = Vec::with_capacity(28 + jl + bl);
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + jl + 8 + bl) as u32).to_le_bytes());
+    out.extend((jl as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(json);
+    out.extend(std::iter::repeat_n(b' ', jl - json.len()));
+    out.extend((bl as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(bin);
+    out.extend(std::iter::repeat_n(0u8, bl - bin.len()));
+    out
+}
+
 /// Every file a glTF names: its buffers' and images' URIs that are not data URIs.
 pub fn references(data: &[u8]) -> Vec<Reference> {
     let Ok(g) = Gltf::from_slice_without_validation(data) else { return Vec::new() };
@@ -141,13 +162,15 @@ fn uri_bytes(name: &str, files: &[NamedBytes], path: &str, uri: &str) -> Result<
     Ok(super::files::ungzip(f)?.data.clone())
 }
 
-fn buffers(name: &str, g: &Gltf, files: &[NamedBytes]) -> Result<Vec<Vec<u8>>, SceneError> {
+/// The bytes of every buffer; the GLB binary chunk is moved out of `g`, not copied.
+fn buffers(name: &str, g: &mut Gltf, files: &[NamedBytes]) -> Result<Vec<Vec<u8>>, SceneError> {
+    let mut blob = g.blob.take();
     let mut out = Vec::new();
     for b in g.buffers() {
         let path = format!("buffers[{}]", b.index());
         let data = match b.source() {
             ::gltf::buffer::Source::Bin => {
-                g.blob.clone().ok_or_else(|| SceneError::file(name, format!("{path}: refers to the GLB binary chunk, which the file lacks")))?
+                blob.take().ok_or_else(|| SceneError::file(name, format!("{path}: refers to the GLB binary chunk, which the file lacks (or another buffer took it)")))?
             }
             ::gltf::buffer::Source::Uri(uri) => uri_bytes(name, files, &path, uri)?,
         };
@@ -474,8 +497,8 @@ fn primitive_mesh(
 /// Loads a glTF 2.0 scene; `files` are the scene's files (main first).
 pub fn load(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) -> Result<Scene, SceneError> {
     let name = main.name.as_str();
-    let g = parse(name, &main.data)?;
-    let buffers = buffers(name, &g, files)?;
+    let mut g = parse(name, &main.data)?;
+    let buffers = buffers(name, &mut g, files)?;
     let nodes = world_nodes(name, &g)?;
     let camera = pick_camera(name, &nodes, None)?.map(|c| c.0);
     let mut images = ImageCache { name, doc: &g, buffers: &buffers, files, done: HashMap::new() };

@@ -493,7 +493,7 @@ impl<'a, 'input> Ctx<'a, 'input> {
         if let Some(f) = s.children().find(|c| c.has_tag_name("film")) {
             let size = |k: &str, d: u32| -> Result<u32, SceneError> {
                 let v = self.float(f, k, d as f64)?;
-                if !(v >= 1.0 && v <= 16384.0 && v.fract() == 0.0) {
+                if !((1.0..=16384.0).contains(&v) && v.fract() == 0.0) {
                     return Err(self.err(self.prop(f, k).unwrap_or(f), format!("film {k} must be a whole number in 1..=16384, got {v}")));
                 }
                 Ok(v as u32)

@@ -19,7 +19,7 @@ use glam::{DVec3, Vec3};
 const CIE_MIN: f64 = 360.0;
 const CIE_MAX: f64 = 830.0;
 /// ∫ȳ(λ) dλ over the table (Mitsuba's `MI_CIE_Y_NORMALIZATION` is its inverse).
-const CIE_Y_INTEGRAL: f64 = 106.7502593994140625;
+const CIE_Y_INTEGRAL: f64 = 106.75025939941406;
 /// ∫ȳ(λ) D65(λ) dλ / ∫ȳ: scales D65 (100 at 560 nm) to unit luminance.
 const D65_NORMALIZATION: f64 = 1.0 / 98.99741751876255;
 
