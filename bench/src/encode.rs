@@ -33,7 +33,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct EncodeArgs {
-    /// Scene the frame is reconstructed from: a built-in name or a .ply / .obj file.
+    /// Scene the frame is reconstructed from: a built-in name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz).
     #[arg(long, default_value = "cornell")]
     pub scene: String,
     /// Square frame sizes to measure (comma-separated).

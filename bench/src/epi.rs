@@ -23,7 +23,7 @@ use std::collections::{BTreeMap, HashMap};
 
 #[derive(clap::Args, Debug)]
 pub struct EpiArgs {
-    /// Scene: a built-in name or a .ply / .obj file (staged on a floor under a point light).
+    /// Scene: a built-in name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz) (a bare model is staged on a floor under a point light).
     #[arg(long, default_value = "cornell-point")]
     pub scene: String,
     /// Square image sizes to measure (comma-separated).

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 #[derive(clap::Args, Debug, Clone)]
 pub struct SceneArgs {
     /// Built-in scene name (cornell, cornell-point, chains, torus-capsule, grid-dragon,
-    /// rooms, materials) or a .ply / .obj file.
+    /// rooms, materials) or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz).
     #[arg(long, default_value = "cornell")]
     pub scene: String,
     /// Shared data directory for built-ins made from data (default: $EDGEPOINT_DATA, else

@@ -33,7 +33,7 @@ pub enum Phase {
 
 #[derive(clap::Args, Debug)]
 pub struct LoadtestArgs {
-    /// Built-in scene name or a .ply / .obj file.
+    /// Built-in scene name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz).
     #[arg(long, default_value = "cornell")]
     pub scene: String,
     /// Worker processes (the workers phase measures 1..=K).

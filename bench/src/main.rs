@@ -64,23 +64,30 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Headless session for N frames: per-stage ms, fps, samples/frame, PSNR vs converged reference.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Frame(frame::FrameArgs),
     /// Worker sample throughput for 1..K workers, scaling, and gRPC overhead vs in-process shading.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Throughput(throughput::ThroughputArgs),
     /// Load test: workers at full rate, concurrent sessions, failover of a worker mid-session.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Loadtest(loadtest::LoadtestArgs),
     /// Scene load, weld and BVH build times.
     Load(load::LoadArgs),
     /// Edge trees and shadow edges: build time, silhouette time vs brute force, shadow-edge time.
     Edges(edges::EdgesArgs),
     /// Render the 1-spp and converged reference images of a scene through local workers.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Reference(frame::ReferenceArgs),
     /// Edge-and-point image stage times (1 thread / all threads) and bytes per pixel.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Epi(epi::EpiArgs),
     /// PSNR/SSIM of edge-and-point vs Render Cache reconstruction from the same samples.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Quality(quality::QualityArgs),
     /// Quality in motion: a session along an orbit, dolly, object slide or camera path,
     /// every frame against the converged reference of its exact state.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
     Motion(motion::MotionArgs),
     /// Scattering models' ns per eval/sample/pdf call, and the direct shader's samples/s
     /// against the shader before materials, in this process.

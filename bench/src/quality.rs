@@ -23,7 +23,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct QualityArgs {
-    /// Scene (repeatable): a built-in name or a .ply / .obj file (a bare model is staged on a
+    /// Scene (repeatable): a built-in name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz) (a bare model is staged on a
     /// floor under a point light).
     #[arg(long)]
     pub scene: Vec<String>,

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 #[derive(clap::Args, Debug)]
 pub struct ThroughputArgs {
-    /// Built-in scene name or a .ply / .obj file.
+    /// Built-in scene name or a scene file (.ply, .obj, Mitsuba .xml, .gltf, .glb; also .gz).
     #[arg(long, default_value = "cornell")]
     pub scene: String,
     /// Largest number of worker processes (runs 1..=K).

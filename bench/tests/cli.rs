@@ -43,9 +43,9 @@ fn fuzz_runs_as_long_as_asked_and_reports_json() {
     assert_eq!(p["seed"], 7);
     assert!(p["cases"].as_u64().unwrap() > 100, "{p}");
     assert_eq!(p["findings"].as_array().unwrap().len(), 0, "{p}");
-    let o = Command::new(BIN).args(["fuzz", "--parser", "gltf", "--seconds", "1"]).output().unwrap();
+    let o = Command::new(BIN).args(["fuzz", "--parser", "fbx", "--seconds", "1"]).output().unwrap();
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown parser 'gltf'"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown parser 'fbx'"));
 }
 
 #[test]

@@ -42,7 +42,7 @@ pub const SHADERS: &[ShaderInfo] = &[ShaderInfo {
             integer: true,
             help: "shadow rays per area light per sample (stratified)",
         },
-        ShaderParam { name: "ambient", min: 0.0, max: 100.0, default: 1.0, integer: false, help: "scale of the scene's ambient term" },
+        ShaderParam { name: "ambient", min: 0.0, max: 100.0, default: 1.0, integer: false, help: "scale of the scene's ambient term (built-ins: their own; a bare model staged by the loader: 0.03 grey; a scene file that brings its own lights or camera: none, so 0 whatever the scale)" },
     ],
 }];
 

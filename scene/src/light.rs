@@ -1,4 +1,6 @@
-//! Lights: point lights and planar convex polygonal area lights (paper 000 §6.3).
+//! Lights: point lights, spot lights (a point light with a cone) and planar convex
+//! polygonal area lights (paper 000 §6.3). Shadows of a spot light are those of a point
+//! light at its position; only its shading has the cone.
 use crate::limits::{check_vec, MAX_WORLD_COORDINATE};
 use glam::Vec3;
 
@@ -10,13 +12,26 @@ pub enum Light {
     /// A one-sided planar convex polygon emitting `radiance` uniformly from the side its
     /// normal (counter-clockwise winding) faces.
     Area { vertices: Vec<Vec3>, radiance: Vec3 },
+    /// A point light shining into a cone around `direction` (unit): full `intensity`
+    /// within `cos_inner` of the axis, falling smoothly to nothing at `cos_outer`
+    /// ([`spot_falloff`]; glTF `KHR_lights_punctual` spot, Mitsuba `spot`).
+    Spot { position: Vec3, direction: Vec3, intensity: Vec3, cos_inner: f32, cos_outer: f32 },
+}
+
+/// The fraction of a spot light's intensity sent along unit direction `to_point` (from the
+/// light): 1 inside the inner cone, 0 outside the outer one, and between them the smooth
+/// square of the linear ramp in cos θ that glTF's `KHR_lights_punctual` recommends.
+pub fn spot_falloff(direction: Vec3, cos_inner: f32, cos_outer: f32, to_point: Vec3) -> f32 {
+    let c = direction.dot(to_point);
+    let t = ((c - cos_outer) / (cos_inner - cos_outer).max(1e-4)).clamp(0.0, 1.0);
+    t * t
 }
 
 impl Light {
     /// Unit normal of an area light (counter-clockwise winding); `None` for point lights.
     pub fn normal(&self) -> Option<Vec3> {
         match self {
-            Light::Point { .. } => None,
+            Light::Point { .. } | Light::Spot { .. } => None,
             Light::Area { vertices, .. } => Some(polygon_normal(vertices).normalize_or_zero()),
         }
     }
@@ -24,7 +39,7 @@ impl Light {
     /// Area of an area light (0 for point lights).
     pub fn area(&self) -> f32 {
         match self {
-            Light::Point { .. } => 0.0,
+            Light::Point { .. } | Light::Spot { .. } => 0.0,
             Light::Area { vertices, .. } => polygon_normal(vertices).length(),
         }
     }
@@ -32,7 +47,7 @@ impl Light {
     /// Centroid (the position for point lights).
     pub fn center(&self) -> Vec3 {
         match self {
-            Light::Point { position, .. } => *position,
+            Light::Point { position, .. } | Light::Spot { position, .. } => *position,
             Light::Area { vertices, .. } => {
                 vertices.iter().copied().sum::<Vec3>() / vertices.len().max(1) as f32
             }
@@ -47,6 +62,18 @@ impl Light {
                 check_vec("point light position", *position, MAX_WORLD_COORDINATE)?;
                 if !intensity.is_finite() {
                     return Err(format!("point light intensity is not finite ({intensity})"));
+                }
+            }
+            Light::Spot { position, direction, intensity, cos_inner, cos_outer } => {
+                check_vec("spot light position", *position, MAX_WORLD_COORDINATE)?;
+                if !intensity.is_finite() {
+                    return Err(format!("spot light intensity is not finite ({intensity})"));
+                }
+                if !((direction.length() - 1.0).abs() <= 1e-3) {
+                    return Err(format!("spot light direction is not a unit vector ({direction})"));
+                }
+                if !(*cos_outer >= -1.0 && cos_inner <= &1.0 && cos_outer <= cos_inner) {
+                    return Err(format!("spot light cone cosines must satisfy -1 <= outer ({cos_outer}) <= inner ({cos_inner}) <= 1"));
                 }
             }
             Light::Area { vertices, radiance } => {
@@ -114,6 +141,24 @@ mod tests {
         assert!((l.normal().unwrap() - Vec3::new(0.0, 1.0, 0.0)).length() < 1e-6);
         assert_eq!(l.center(), Vec3::new(1.0, 1.0, 1.0));
         l.validate().unwrap();
+    }
+
+    #[test]
+    fn spot_cone_falls_off_between_its_angles() {
+        let (inner, outer) = (10f32.to_radians().cos(), 30f32.to_radians().cos());
+        let at = |deg: f32| spot_falloff(Vec3::Y, inner, outer, Vec3::new(deg.to_radians().sin(), deg.to_radians().cos(), 0.0));
+        assert_eq!(at(0.0), 1.0);
+        assert_eq!(at(9.0), 1.0);
+        assert_eq!(at(31.0), 0.0);
+        assert_eq!(at(180.0), 0.0);
+        let mid = at(20.0);
+        let lin = (20f32.to_radians().cos() - outer) / (inner - outer);
+        assert!((mid - lin * lin).abs() < 1e-6 && mid > 0.0 && mid < 1.0);
+        let s = Light::Spot { position: Vec3::ZERO, direction: Vec3::Y, intensity: Vec3::ONE, cos_inner: inner, cos_outer: outer };
+        s.validate().unwrap();
+        assert_eq!(s.center(), Vec3::ZERO);
+        let bad = Light::Spot { position: Vec3::ZERO, direction: Vec3::Y, intensity: Vec3::ONE, cos_inner: outer, cos_outer: inner };
+        assert!(bad.validate().is_err());
     }
 
     #[test]

@@ -86,6 +86,39 @@ impl Mesh {
     /// collapsed triangles and unused vertices, computes face normals and edge adjacency.
     /// Triangle indices must be < positions.len() (loaders check and report them).
     pub fn from_triangles(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, progress: &dyn Progress) -> Mesh {
+        Self::weld(positions, triangles, progress).0
+    }
+
+    /// [`Mesh::from_triangles`] carrying per-corner attributes (one entry per input
+    /// triangle): the entries of triangles that welding drops are dropped with them, so
+    /// `corners` stays aligned with `triangles`. An attribute list whose length is not the
+    /// triangle count is a loader bug; it is dropped (with an error log) rather than
+    /// misaligned.
+    pub fn from_triangles_with_corners(
+        positions: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+        corners: Corners,
+        progress: &dyn Progress,
+    ) -> Mesh {
+        let n = triangles.len();
+        let (mut mesh, kept) = Self::weld(positions, triangles, progress);
+        fn keep<T: Copy>(what: &str, list: Option<Vec<T>>, n: usize, kept: &[u32]) -> Option<Vec<T>> {
+            let list = list?;
+            if list.len() != n {
+                tracing::error!("{what}: {} corner entries for {n} triangles; dropped", list.len());
+                return None;
+            }
+            Some(kept.iter().map(|&t| list[t as usize]).collect())
+        }
+        mesh.corners = Corners {
+            normals: keep("shading normals", corners.normals, n, &kept),
+            uvs: keep("texture coordinates", corners.uvs, n, &kept),
+        };
+        mesh
+    }
+
+    /// Welds and builds the mesh; also returns the input index of every kept triangle.
+    fn weld(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, progress: &dyn Progress) -> (Mesh, Vec<u32>) {
         let input_vertices = positions.len();
         let input_triangles = triangles.len();
 
@@ -112,7 +145,8 @@ impl Mesh {
         let mut used = vec![u32::MAX; positions.len()];
         let mut out_pos = Vec::new();
         let mut out_tri = Vec::with_capacity(triangles.len());
-        for t in &triangles {
+        let mut kept = Vec::with_capacity(triangles.len());
+        for (i, t) in triangles.iter().enumerate() {
             let w = [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]];
             if w[0] == w[1] || w[1] == w[2] || w[0] == w[2] {
                 degenerate_dropped += 1;
@@ -128,6 +162,7 @@ impl Mesh {
                 c[k] = *slot;
             }
             out_tri.push(c);
+            kept.push(i as u32);
         }
         drop(positions);
 
@@ -141,7 +176,7 @@ impl Mesh {
             corners: Corners::default(),
         };
         mesh.rebuild_derived(progress);
-        mesh
+        (mesh, kept)
     }
 
     /// Recomputes face normals, bounds and edge adjacency from positions and triangles.
@@ -235,6 +270,13 @@ impl Mesh {
         for t in &mut self.triangles {
             t.swap(1, 2);
         }
+        // Corner attributes follow their corners.
+        if let Some(n) = &mut self.corners.normals {
+            n.iter_mut().for_each(|c| c.swap(1, 2));
+        }
+        if let Some(uv) = &mut self.corners.uvs {
+            uv.iter_mut().for_each(|c| c.swap(1, 2));
+        }
         self.rebuild_derived(&crate::NoProgress);
     }
 
@@ -316,6 +358,72 @@ mod tests {
         assert_eq!(m.positions.len(), 4);
         assert_eq!(m.edges.len(), 5);
         assert_eq!(m.boundary_edges(), 4);
+    }
+
+    /// Corner attributes stay with their triangles through welding: the oracle is the
+    /// un-welded soup, where every triangle carries its own attributes by construction.
+    #[test]
+    fn corners_stay_aligned_through_welding() {
+        use glam::Vec2;
+        let mut rng = 0x9e3779b97f4a7c15u64;
+        let mut next = move || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        for case in 0..50 {
+            // A small grid of positions (so welding merges many) and random triangles over
+            // it, some collapsing.
+            let grid: Vec<Vec3> = (0..9).map(|i| Vec3::new((i % 3) as f32, (i / 3) as f32, (i % 2) as f32)).collect();
+            let n = 5 + case % 20;
+            let mut positions = Vec::new();
+            let mut triangles = Vec::new();
+            let mut normals = Vec::new();
+            let mut uvs = Vec::new();
+            for t in 0..n {
+                let base = positions.len() as u32;
+                let mut tri = [Vec3::ZERO; 3];
+                for c in &mut tri {
+                    *c = grid[(next() % 9) as usize];
+                }
+                positions.extend(tri);
+                triangles.push([base, base + 1, base + 2]);
+                // Attributes encode the triangle's corner positions and its input index.
+                normals.push(tri.map(|p| p + Vec3::new(t as f32 + 1.0, 0.0, 0.0)));
+                uvs.push(tri.map(|p| Vec2::new(p.x + 10.0 * t as f32, p.y)));
+            }
+            let m = Mesh::from_triangles_with_corners(
+                positions.clone(),
+                triangles.clone(),
+                Corners { normals: Some(normals.clone()), uvs: Some(uvs.clone()) },
+                &NoProgress,
+            );
+            let (mn, mu) = (m.corners.normals.as_ref().unwrap(), m.corners.uvs.as_ref().unwrap());
+            assert_eq!((mn.len(), mu.len()), (m.triangles.len(), m.triangles.len()));
+            // Oracle: the input triangles that do not collapse, in order.
+            let kept: Vec<usize> = (0..n).filter(|&t| {
+                let [a, b, c] = [positions[3 * t], positions[3 * t + 1], positions[3 * t + 2]];
+                a != b && b != c && a != c
+            }).collect();
+            assert_eq!(kept.len(), m.triangles.len(), "case {case}");
+            for (f, &t) in kept.iter().enumerate() {
+                let tri = m.triangle(f);
+                for k in 0..3 {
+                    assert_eq!(tri[k], positions[3 * t + k]);
+                    assert_eq!(mn[f][k], normals[t][k], "case {case} face {f} corner {k}");
+                    assert_eq!(mu[f][k], uvs[t][k]);
+                }
+            }
+        }
+        // A list of the wrong length is dropped, not misaligned.
+        let m = Mesh::from_triangles_with_corners(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            vec![[0, 1, 2]],
+            Corners { normals: Some(vec![]), uvs: None },
+            &NoProgress,
+        );
+        assert_eq!(m.corners, Corners::default());
     }
 
     #[test]

@@ -67,8 +67,28 @@ fn fuzz_grid_dragon() {
 }
 
 #[test]
+fn fuzz_mitsuba() {
+    fuzz("mitsuba");
+}
+
+#[test]
+fn fuzz_gltf() {
+    fuzz("gltf");
+}
+
+#[test]
+fn fuzz_glb() {
+    fuzz("glb");
+}
+
+#[test]
+fn fuzz_gz() {
+    fuzz("gz");
+}
+
+#[test]
 fn every_target_has_a_test_and_seeds() {
-    let tested = ["ply", "obj", "mtl", "grid-dragon"];
+    let tested = ["ply", "obj", "mtl", "grid-dragon", "mitsuba", "gltf", "glb", "gz"];
     for t in TARGETS {
         assert!(tested.contains(&t.name), "target {} has no test in tests/fuzz.rs", t.name);
         assert!(corpus().join("seeds").join(t.name).is_dir(), "target {} has no seeds", t.name);

@@ -1,17 +1,8 @@
 //! PLY / OBJ loaders on the shared real meshes and on malformed input.
 use edgepoint_scene::load::{load_files, load_path, NamedBytes};
 use edgepoint_scene::{NoProgress, Scene, SceneError};
-use std::path::PathBuf;
-
-fn data(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipping: {} not found", p.display());
-        None
-    }
-}
+mod common;
+use common::data;
 
 fn load(name: &str, bytes: &[u8]) -> Result<Scene, SceneError> {
     load_files(&[NamedBytes { name: name.into(), data: bytes.to_vec() }], &NoProgress)
@@ -379,7 +370,7 @@ fn each_obj_object_is_welded_from_its_own_vertices() {
 /// materials) in both.
 #[test]
 fn mtllib_paths_stay_inside_the_objs_directory() {
-    use edgepoint_scene::load::{mtllib_names, mtllib_path};
+    use edgepoint_scene::load::{mtllib_names, reference_path as mtllib_path};
     let dir = std::env::temp_dir().join(format!("edgepoint-mtllib-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(dir.join("scene/mat")).unwrap();

@@ -47,7 +47,8 @@ pub(crate) fn shade_direct_before_materials(
     for (li, light) in scene.lights.iter().enumerate() {
         let li = li as u32;
         match light {
-            PreparedLight::Point { position, intensity } => {
+            // No spot cones: this shader predates them, and no built-in scene has one.
+            PreparedLight::Point { position, intensity, .. } => {
                 let to = *position - origin;
                 let d2 = to.length_squared();
                 let dist = d2.sqrt();

@@ -35,14 +35,20 @@ impl AreaLight {
 
 #[derive(Debug, Clone)]
 pub enum PreparedLight {
-    Point { position: Vec3, intensity: Vec3 },
+    /// A point light; a spot light is one with a `cone` (unit axis, cos inner, cos outer).
+    Point { position: Vec3, intensity: Vec3, cone: Option<(Vec3, f32, f32)> },
     Area(AreaLight),
 }
 
 impl PreparedLight {
     pub fn new(l: &Light) -> PreparedLight {
         match l {
-            Light::Point { position, intensity } => PreparedLight::Point { position: *position, intensity: *intensity },
+            Light::Point { position, intensity } => PreparedLight::Point { position: *position, intensity: *intensity, cone: None },
+            Light::Spot { position, direction, intensity, cos_inner, cos_outer } => PreparedLight::Point {
+                position: *position,
+                intensity: *intensity,
+                cone: Some((*direction, *cos_inner, *cos_outer)),
+            },
             Light::Area { vertices, radiance } => {
                 let tris: Vec<[Vec3; 3]> = (1..vertices.len() - 1).map(|i| [vertices[0], vertices[i], vertices[i + 1]]).collect();
                 let areas: Vec<f32> = tris.iter().map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() * 0.5).collect();

@@ -178,21 +178,24 @@ fn shade_direct(
     for (li, light) in scene.lights.iter().enumerate() {
         let li = li as u32;
         match light {
-            PreparedLight::Point { position, intensity } => {
+            PreparedLight::Point { position, intensity, cone } => {
                 let to = *position - origin;
                 let d2 = to.length_squared();
                 let dist = d2.sqrt();
                 let wi = to / dist;
                 let cos = n.dot(wi);
-                if cos <= 0.0 {
+                // A spot light sends only its cone's share this way.
+                let share = cone.map_or(1.0, |(axis, inner, outer)| edgepoint_scene::light::spot_falloff(axis, inner, outer, -wi));
+                if cos <= 0.0 || share <= 0.0 {
                     continue;
                 }
+                let intensity = *intensity * share;
                 match inst.occluded(&scene.bvh, origin, wi, 0.0, dist * (1.0 - 1e-4)) {
                     Some(b) => push_unique(&mut triples, [li, b, h.object]),
                     None if !lit => {}
                     None => match sp.constant {
-                        Some(f) => rgb += f * *intensity * (cos / d2),
-                        None => rgb += sp.eval_cos(wi) * *intensity / d2,
+                        Some(f) => rgb += f * intensity * (cos / d2),
+                        None => rgb += sp.eval_cos(wi) * intensity / d2,
                     },
                 }
             }

@@ -93,3 +93,51 @@ fn logs_into_a_pipe_have_no_colour_codes() {
     assert!(logged.contains("INFO"), "info lines were logged: {logged}");
     assert!(!logged.contains('\x1b'), "colour codes in a piped log: {logged:?}");
 }
+
+/// Issue 13: a Mitsuba scene file through the real binaries — its meshes sent along, its
+/// film size, its camera (not mirrored: the red wall on the left), lit by its light, no
+/// staging.
+#[test]
+fn the_mitsuba_cornell_box_renders_from_its_own_camera() {
+    let xml = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/cornell_box/cbox.xml");
+    if !xml.exists() {
+        eprintln!("skipping: {} not found", xml.display());
+        return;
+    }
+    let viewer = edgepoint_viewer::local::find_binary("edgepoint-viewer").expect("viewer binary built");
+    let out = std::env::temp_dir().join(format!("edgepoint-viewer-cbox-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let status = Command::new(viewer)
+        .args(["--local", "--headless", "--frames", "40", "--quiet", "--scene"])
+        .arg(&xml)
+        .arg("--out")
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .status()
+        .expect("viewer runs");
+    assert!(status.success(), "viewer exit status {status}");
+    let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
+    let last: serde_json::Value = serde_json::from_str(stats.lines().last().unwrap()).unwrap();
+    assert_eq!((last["width"].as_u64(), last["height"].as_u64()), (Some(256), Some(256)), "the film's $res");
+    let eye: Vec<f64> = last["camera"]["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert_eq!(eye, [278.0, 273.0, -800.0]);
+    assert!((last["camera"]["fov"].as_f64().unwrap() - 39.3077).abs() < 1e-3);
+    let img = image::open(out.join(edgepoint_viewer::headless::frame_file_name(40))).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (256, 256));
+    // Mean colour of a block of pixels.
+    let mean = |x0: u32, y0: u32, w: u32, h: u32| {
+        let mut s = [0f64; 3];
+        for y in y0..y0 + h {
+            for x in x0..x0 + w {
+                let p = img.get_pixel(x, y);
+                (0..3).for_each(|c| s[c] += p[c] as f64);
+            }
+        }
+        s.map(|v| v / (w * h) as f64)
+    };
+    let (left, right, lamp) = (mean(10, 100, 20, 60), mean(226, 100, 20, 60), mean(112, 33, 32, 6));
+    assert!(left[0] > 2.0 * left[1] && left[0] > 20.0, "red wall on the left: {left:?}");
+    assert!(right[1] > 1.5 * right[0] && right[1] > 4.0 * right[2], "green wall on the right: {right:?}");
+    assert!(lamp.iter().all(|&c| c > 200.0), "the luminaire near the top centre is bright: {lamp:?}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -90,6 +90,16 @@ impl CameraSpec {
         CameraSpec { eye: Some(c.eye), target: Some(c.target), up: Some(c.up), fov_y_degrees: Some(c.fov_y_degrees) }
     }
 
+    /// `base` with the fields this spec sets replaced, as a full spec.
+    pub fn over(&self, base: &Camera) -> CameraSpec {
+        CameraSpec {
+            eye: self.eye.or(Some(base.eye)),
+            target: self.target.or(Some(base.target)),
+            up: self.up.or(Some(base.up)),
+            fov_y_degrees: self.fov_y_degrees.or(Some(base.fov_y_degrees)),
+        }
+    }
+
     /// Whether no field is set.
     pub fn is_empty(&self) -> bool {
         *self == CameraSpec::default()

@@ -2,7 +2,7 @@
 //! (proto/proto/edgepoint.proto) as a typed client. The first message is `start`; the server
 //! answers `started`, then streams frames and, for bad later messages, `rejected` notes.
 //! Also turns a `--scene` argument into the wire `SceneSource` (built-in name or files).
-use anyhow::{bail, Context};
+use anyhow::bail;
 use edgepoint_proto::{self as pb, renderer_client::RendererClient, server_msg, viewer_msg};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -341,8 +341,9 @@ pub fn camera_from_wire(c: &pb::Camera) -> edgepoint_scene::Camera {
 
 /// Turns a `--scene` argument into a scene source. A bare name (no path separator, no
 /// extension, and no file of that name) is a built-in scene (`cornell`); anything else is
-/// a file path: `.ply` is sent alone, `.obj` together with the `mtllib` files it names
-/// (resolved next to it). Errors name the path (and the OBJ line of a missing `mtllib`).
+/// a file path (`.ply`, `.obj`, `.xml`, `.gltf`, `.glb`, each also `.gz`), sent together
+/// with the files it references ([`edgepoint_scene::load::gather`]). Errors name the path;
+/// a missing referenced file is a warning naming the line that references it.
 /// Built-ins made from shared data (`grid-dragon`) are sent as their description plus the
 /// data files, found as [`edgepoint_scene::data`] describes.
 pub fn scene_source_from_arg(arg: &str) -> anyhow::Result<pb::SceneSource> {
@@ -362,40 +363,47 @@ pub fn scene_source_from_arg_in(arg: &str, data_dir: Option<&Path>) -> anyhow::R
             Some(files) => Ok(pb::files_source(files.into_iter().map(|f| (f.name, f.data)).collect())),
         };
     }
-    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-    let main_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| arg.to_string());
-    let read = |p: &Path| std::fs::read(p).with_context(|| format!("cannot read scene file {}", p.display()));
+    let file_name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let inner = file_name.strip_suffix(".gz").unwrap_or(&file_name);
+    let ext = Path::new(inner).extension().map(|e| e.to_string_lossy().into_owned());
     match ext.as_deref() {
-        Some("ply") => Ok(pb::files_source(vec![(main_name, read(path)?)])),
-        Some("obj") => {
-            let data = read(path)?;
-            let mut files: Vec<(String, Vec<u8>)> = vec![];
-            let dir = path.parent().unwrap_or(Path::new(""));
-            // Only libraries inside the OBJ's directory are sent (never `/etc/passwd` or
-            // `../..`); one that may not be read, or is missing, is a warning here as in the
-            // loader: its materials fall back to the default.
-            for (line_no, name) in edgepoint_scene::load::mtllib_names(&data) {
-                if files.iter().any(|(n, _)| n == &name) {
-                    continue;
-                }
-                let bytes = edgepoint_scene::load::mtllib_path(dir, &name)
-                    .and_then(|p| std::fs::read(&p).map_err(|e| format!("cannot read {}: {e}", p.display())));
-                match bytes {
-                    Ok(b) => files.push((name, b)),
-                    Err(e) => tracing::warn!("{}:{line_no}: mtllib {name} not sent: {e}; its materials fall back to the default", path.display()),
-                }
-            }
-            files.insert(0, (main_name, data));
-            Ok(pb::files_source(files))
+        // The scene file and every file it references (an OBJ's mtllibs, a Mitsuba scene's
+        // meshes and textures, a glTF's buffers and images), read by the scene crate's one
+        // gathering rule: only files inside the scene file's directory are sent (never
+        // `/etc/passwd` or `../..`); one that may not be read, or is missing, is a warning.
+        Some("ply" | "obj" | "xml" | "gltf" | "glb") => {
+            let files = edgepoint_scene::load::gather(path).map_err(|e| anyhow::anyhow!("scene file {e}"))?;
+            Ok(pb::files_source(files.into_iter().map(|f| (f.name, f.data)).collect()))
         }
-        Some(other) => bail!("{}: unsupported scene file type '.{other}' (supported: .ply, .obj)", path.display()),
+        Some(other) => bail!(
+            "{}: unsupported scene file type '.{other}' (supported: {SCENE_FILE_TYPES})",
+            path.display()
+        ),
         None => bail!(
-            "{}: a scene file needs a .ply or .obj extension (built-in scenes are named without one: {})",
+            "{}: a scene file needs one of the extensions {SCENE_FILE_TYPES} (built-in scenes are named without one: {})",
             path.display(),
             builtin_names()
         ),
     }
 }
+
+/// The camera (the one called `camera_name`, else the first) and film size a scene file
+/// of `source` brings, read from its main file only; nothing for a built-in.
+pub fn scene_file_view(source: &pb::SceneSource, camera_name: Option<&str>) -> anyhow::Result<edgepoint_scene::load::FileView> {
+    use edgepoint_proto::scene_source::Source;
+    let Some(Source::Files(f)) = &source.source else {
+        if let Some(n) = camera_name {
+            bail!("--camera-name {n}: built-in scenes have one camera and no camera names");
+        }
+        return Ok(Default::default());
+    };
+    let main: Vec<edgepoint_scene::load::NamedBytes> =
+        f.files.iter().take(1).map(|nf| edgepoint_scene::load::NamedBytes { name: nf.name.clone(), data: nf.data.clone() }).collect();
+    edgepoint_scene::load::file_view(&main, camera_name).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The scene file types `--scene` takes.
+pub const SCENE_FILE_TYPES: &str = ".ply, .obj, .xml (Mitsuba 3), .gltf, .glb, each also .gz";
 
 fn builtin_names() -> String {
     edgepoint_scene::builtin::BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
@@ -497,8 +505,8 @@ mod tests {
 
     #[test]
     fn unsupported_extensions_are_refused() {
-        let msg = format!("{:#}", scene_source_from_arg("model.gltf").unwrap_err());
-        assert!(msg.contains("model.gltf") && msg.contains(".gltf"), "{msg}");
+        let msg = format!("{:#}", scene_source_from_arg("model.fbx").unwrap_err());
+        assert!(msg.contains("model.fbx") && msg.contains(".gltf"), "{msg}");
     }
 
     #[test]

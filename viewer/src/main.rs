@@ -101,8 +101,10 @@ struct Args {
     cluster_log_file: Option<PathBuf>,
 
     /// Scene to render: a built-in name (cornell, cornell-point, chains, torus-capsule,
-    /// grid-dragon, rooms, materials) or a .ply / .obj file (an OBJ's mtllib files are sent along from
-    /// its directory).
+    /// grid-dragon, rooms, materials) or a scene file: .ply, .obj, Mitsuba 3 .xml, glTF .gltf / .glb,
+    /// each also .gz (the files it references — an OBJ's mtllibs, a Mitsuba scene's meshes,
+    /// a glTF's buffers and images — are sent along from its directory). A file with its
+    /// own camera is seen through it; a bare model is staged on a floor under a light.
     #[arg(long, value_name = "NAME|PATH", default_value = "cornell")]
     scene: String,
 
@@ -112,13 +114,14 @@ struct Args {
     #[arg(long, value_name = "DIR")]
     data_dir: Option<PathBuf>,
 
-    /// Frame width in pixels.
-    #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
-    width: u32,
+    /// Frame width in pixels [default: the scene file's film width (Mitsuba `film`; glTF:
+    /// the camera's aspect ratio at 512 high), else 512].
+    #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(1..=16384))]
+    width: Option<u32>,
 
-    /// Frame height in pixels.
-    #[arg(long, value_name = "PIXELS", default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
-    height: u32,
+    /// Frame height in pixels [default: the scene file's film height, else 512].
+    #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: Option<u32>,
 
     /// Shader the workers run for each sample (listed below).
     #[arg(long, value_name = "NAME", default_value = "direct")]
@@ -176,10 +179,16 @@ struct Args {
     headless: bool,
 
     /// Camera overriding the scene's, any subset of "eye=X,Y,Z target=X,Y,Z up=X,Y,Z
-    /// fov=DEG" (sent in `start`; the keys left out keep the scene camera's). With --orbit
-    /// only fov is allowed (the orbit places the camera).
+    /// fov=DEG" (sent in `start`; the keys left out keep the scene camera's — for a scene
+    /// file that brings a camera, the file's). With --orbit only fov is allowed (the orbit
+    /// places the camera).
     #[arg(long, value_name = "KEYS", value_parser = parse_camera_spec)]
     camera: Option<CameraSpec>,
+
+    /// Use the scene file's camera of this name instead of its first one (glTF: camera or
+    /// node name; Mitsuba XML: sensor id); --camera keys still override it.
+    #[arg(long, value_name = "NAME")]
+    camera_name: Option<String>,
 
     #[command(flatten)]
     orbit: OrbitArgs,
@@ -333,6 +342,17 @@ fn main() -> ExitCode {
 fn run(args: Args) -> Result<()> {
     // Read the scene and the camera path before starting anything: a wrong path fails at once.
     let scene = scene_source_from_arg_in(&args.scene, args.data_dir.as_deref())?;
+    // The file's film size and named camera, read from its bytes (its meshes are not
+    // loaded here: the server and workers do that).
+    let view = edgepoint_viewer::client::scene_file_view(&scene, args.camera_name.as_deref())?;
+    let (width, height) = (
+        args.width.or(view.film.map(|f| f.0)).unwrap_or(512),
+        args.height.or(view.film.map(|f| f.1)).unwrap_or(512),
+    );
+    let camera = match (&args.camera_name, view.camera) {
+        (Some(_), Some(named)) => Some(args.camera.unwrap_or_default().over(&named)),
+        _ => args.camera,
+    };
     let plan = camera_plan(&args)?;
     let encoding = args.frame_encoding()?;
     let mut recorder = args.record_path.as_deref().map(PathWriter::create).transpose()?;
@@ -391,13 +411,13 @@ fn run(args: Args) -> Result<()> {
     });
     let start = pb::Start {
         scene: Some(scene),
-        width: args.width,
-        height: args.height,
+        width,
+        height,
         shader: args.shader.clone(),
         shader_params: args.shader_param.iter().cloned().collect(),
         encoding: encoding as i32,
         settings,
-        camera: args.camera.map(|c| c.to_wire()),
+        camera: camera.map(|c| c.to_wire()),
     };
     let token = match (&args.token, &args.token_file) {
         (Some(t), _) => Some(t.trim().to_string()),
@@ -416,7 +436,7 @@ fn run(args: Args) -> Result<()> {
         tls_domain: args.tls_domain.clone(),
         start_timeout: Some(std::time::Duration::from_secs(args.start_timeout_secs)),
     };
-    tracing::info!(%url, scene = %args.scene, width = args.width, height = args.height, "starting session");
+    tracing::info!(%url, scene = %args.scene, width, height, "starting session");
     let connected = rt.block_on(async {
         let mut stop = stop_rx.clone();
         tokio::select! {
@@ -441,7 +461,7 @@ fn run(args: Args) -> Result<()> {
 
     let want_window = !args.headless && display_available();
     let window = if want_window {
-        match ViewerWindow::open("edgepoint-viewer", args.width, args.height) {
+        match ViewerWindow::open("edgepoint-viewer", width, height) {
             Ok(w) => Some(w),
             Err(e) => {
                 tracing::warn!("{e:#}; running headless");

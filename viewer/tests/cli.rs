@@ -98,7 +98,7 @@ fn a_bare_name_that_is_a_file_is_read_as_a_file() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("needs a .ply or .obj extension"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("needs one of the extensions .ply, .obj"), "{}", stderr(&o));
 }
 
 #[test]

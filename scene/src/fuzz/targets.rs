@@ -32,6 +32,10 @@ pub const TARGETS: &[Target] = &[
     Target { name: "obj", ext: "obj", about: "OBJ reader with a fixed MTL, objects, weld, staging", run: obj },
     Target { name: "mtl", ext: "mtl", about: "MTL reader, used by a fixed OBJ", run: mtl },
     Target { name: "grid-dragon", ext: "ply", about: "the grid-dragon built-in around a fuzzed dragon PLY", run: grid_dragon },
+    Target { name: "mitsuba", ext: "xml", about: "Mitsuba 3 XML with a fixed OBJ mesh file, spectra, transforms, staging", run: mitsuba },
+    Target { name: "gltf", ext: "gltf", about: "glTF JSON with a fixed external buffer (and data-URI buffers)", run: gltf },
+    Target { name: "glb", ext: "glb", about: "binary glTF (JSON and BIN chunks)", run: glb },
+    Target { name: "gz", ext: "gz", about: "gzip layer (bounded inflation) around an OBJ", run: gz },
 ];
 
 /// The target called `name`.
@@ -68,4 +72,36 @@ fn mtl(input: &[u8]) -> Result<(), String> {
 
 fn grid_dragon(input: &[u8]) -> Result<(), String> {
     load(&[crate::builtin::description("grid-dragon"), file(crate::builtin::data_files("grid-dragon")[0], input)])
+}
+
+/// The mesh file the `mitsuba` target's inputs may name (`meshes/quad.obj`).
+const MITSUBA_OBJ: &[u8] = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n";
+
+fn mitsuba(input: &[u8]) -> Result<(), String> {
+    load(&[file("fuzz.xml", input), file("meshes/quad.obj", MITSUBA_OBJ)])
+}
+
+/// The external buffer the `gltf` target's inputs may name (`quad.bin`): a unit quad's
+/// positions (48 bytes), normals (48), UVs (32) and u16 indices (12 + 4 padding).
+fn gltf_quad_buffer() -> Vec<u8> {
+    let mut b = Vec::new();
+    let f = |b: &mut Vec<u8>, v: &[f32]| v.iter().for_each(|x| b.extend(x.to_le_bytes()));
+    f(&mut b, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0]);
+    f(&mut b, &[0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]);
+    f(&mut b, &[0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]);
+    [0u16, 1, 2, 0, 2, 3].iter().for_each(|i| b.extend(i.to_le_bytes()));
+    b.extend([0; 4]);
+    b
+}
+
+fn gltf(input: &[u8]) -> Result<(), String> {
+    load(&[file("fuzz.gltf", input), file("quad.bin", &gltf_quad_buffer())])
+}
+
+fn glb(input: &[u8]) -> Result<(), String> {
+    load(&[file("fuzz.glb", input)])
+}
+
+fn gz(input: &[u8]) -> Result<(), String> {
+    load(&[file("fuzz.obj.gz", input)])
 }

@@ -1,10 +1,13 @@
-//! Wavefront OBJ reader (+ MTL colours). `v` and `f` (forms `v`, `v/vt`, `v//vn`, `v/vt/vn`,
-//! negative = relative indices; polygons fan-triangulated); `o` / `g` start a new object and
-//! `usemtl` a new material run: each (object, material) run becomes one scene object.
-//! `mtllib` files are looked up among the given files by base name (a library that was not
-//! given is a warning and its materials fall back to the default, as in the viewer, which
-//! sends only the libraries it may: see [`mtllib_path`]); MTL `Kd` is the diffuse colour and
-//! `Ke` the emission. Other statements are ignored.
+//! Wavefront OBJ reader (+ MTL colours). `v`, `vn`, `vt` and `f` (forms `v`, `v/vt`,
+//! `v//vn`, `v/vt/vn`, negative = relative indices; polygons fan-triangulated); `o` / `g`
+//! start a new object and `usemtl` a new material run: each (object, material) run becomes
+//! one scene object. Normals and texture coordinates become per-corner attributes
+//! ([`crate::Corners`]) of the triangles. `mtllib` files are looked up among the given files
+//! ([`super::files::find`]; a library that was not given is a warning and its materials
+//! fall back to the default, as in the viewer, which sends only the libraries it may: see
+//! [`super::files::reference_path`]); a `usemtl` naming no material of the libraries is a
+//! warning too. MTL `Kd` is the diffuse colour and `Ke` the emission. Other statements are
+//! ignored.
 //!
 //! Cost is linear in the file: runs are found by a map, not by a search over the runs so
 //! far, and only emissive runs keep their source polygons (for their area lights).
@@ -13,25 +16,58 @@ use crate::limits::{check_coordinate, MAX_COORDINATE};
 use crate::load::NamedBytes;
 use crate::{Material, Progress};
 use glam::Vec3;
+use glam::Vec2;
 use std::collections::HashMap;
-use std::path::{Component, Path, PathBuf};
 
 /// One (object, material) run of faces, indices into the file's global vertex list.
 pub struct Run {
     pub name: String,
     pub material: Material,
     pub triangles: Vec<[u32; 3]>,
+    /// Per triangle, the `vn` index of each corner ([`NONE`] where the face gave none).
+    pub normal_ids: Vec<[u32; 3]>,
+    /// Per triangle, the `vt` index of each corner ([`NONE`] where the face gave none).
+    pub uv_ids: Vec<[u32; 3]>,
     /// Source polygons of an emissive run (its faces become area lights); empty otherwise.
     pub polygons: Vec<Vec<u32>>,
 }
 
+/// No `vn` / `vt` for this corner.
+pub const NONE: u32 = u32::MAX;
+
 pub struct ObjData {
     pub positions: Vec<Vec3>,
+    /// `vn` normals (normalized; zero where the file gave a zero vector).
+    pub normals: Vec<Vec3>,
+    /// `vt` coordinates (u, v).
+    pub uvs: Vec<Vec2>,
     pub runs: Vec<Run>,
 }
 
-fn base_name(s: &str) -> &str {
-    s.rsplit(['/', '\\']).next().unwrap_or(s)
+impl ObjData {
+    /// The corner attributes of `run`'s triangles: present when any corner of the run has
+    /// them (corners without get a zero normal / zero UV).
+    pub fn corners(&self, run: &Run) -> crate::Corners {
+        let normals = run.normal_ids.iter().any(|t| t.iter().any(|&i| i != NONE)).then(|| {
+            run.normal_ids.iter().map(|t| t.map(|i| if i == NONE { Vec3::ZERO } else { self.normals[i as usize] })).collect()
+        });
+        let uvs = run.uv_ids.iter().any(|t| t.iter().any(|&i| i != NONE)).then(|| {
+            run.uv_ids.iter().map(|t| t.map(|i| if i == NONE { Vec2::ZERO } else { self.uvs[i as usize] })).collect()
+        });
+        crate::Corners { normals, uvs }
+    }
+}
+
+/// The 0-based index an OBJ index `tok` (1-based, or negative = relative) names among `n`
+/// defined so far.
+fn obj_index(name: &str, ln: usize, tok: &str, n: usize, what: &str, plural: &str) -> Result<u32, SceneError> {
+    let idx: i64 = tok.parse().map_err(|_| SceneError::line(name, ln, format!("{what} index `{tok}` is not a whole number")))?;
+    let n = n as i64;
+    let abs = if idx > 0 { idx - 1 } else { n + idx };
+    if idx == 0 || abs < 0 || abs >= n {
+        return Err(SceneError::line(name, ln, format!("face refers to {what} {idx} but {n} {plural} are defined so far")));
+    }
+    Ok(abs as u32)
 }
 
 fn parse_f32(name: &str, ln: usize, tok: Option<&str>, what: &str) -> Result<f32, SceneError> {
@@ -65,31 +101,6 @@ pub fn mtllib_names(data: &[u8]) -> Vec<(usize, String)> {
         }
     }
     out
-}
-
-/// Where the material library `lib` named by an OBJ in directory `dir` may be read from: a
-/// relative path to a file in `dir` or below it. Absolute paths, `..` and symbolic links
-/// that lead out of `dir` are refused, so an OBJ cannot make a client send arbitrary local
-/// files (`mtllib /etc/passwd`) to a server. The error says why.
-pub fn mtllib_path(dir: &Path, lib: &str) -> Result<PathBuf, String> {
-    let rel = Path::new(lib);
-    if rel.is_absolute() || rel.components().any(|c| !matches!(c, Component::Normal(_) | Component::CurDir)) {
-        return Err(format!("`{lib}` is not a relative path inside the OBJ's directory (absolute paths and `..` are refused)"));
-    }
-    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
-    let path = dir.join(rel);
-    let (real_dir, real) = match (dir.canonicalize(), path.canonicalize()) {
-        (Ok(d), Ok(p)) => (d, p),
-        (_, Err(e)) => return Err(format!("cannot read {}: {e}", path.display())),
-        (Err(e), _) => return Err(format!("cannot read {}: {e}", dir.display())),
-    };
-    if !real.starts_with(&real_dir) {
-        return Err(format!("{} leads outside the OBJ's directory ({})", path.display(), real.display()));
-    }
-    if !real.is_file() {
-        return Err(format!("{} is not a file", path.display()));
-    }
-    Ok(path)
 }
 
 /// Parses an MTL file into materials by name.
@@ -130,12 +141,17 @@ pub fn read_mtl(name: &str, data: &[u8]) -> Result<HashMap<String, Material>, Sc
     Ok(out)
 }
 
-/// Parses an OBJ file; `others` are the files it may reference (MTL).
-pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -> Result<ObjData, SceneError> {
+/// Parses an OBJ file; `files` are the scene's files (main first), where its MTL
+/// libraries are looked up.
+pub fn read(main: &NamedBytes, files: &[NamedBytes], progress: &dyn Progress) -> Result<ObjData, SceneError> {
     let name = main.name.as_str();
     let text = std::str::from_utf8(&main.data).map_err(|_| SceneError::file(name, "OBJ file is not UTF-8 text"))?;
     progress.begin(&format!("parse {name}"), text.len() as u64);
     let mut positions: Vec<Vec3> = Vec::new();
+    let mut normals: Vec<Vec3> = Vec::new();
+    let mut uvs: Vec<Vec2> = Vec::new();
+    let mut libraries_given = false;
+    let mut warned_missing: std::collections::HashSet<String> = Default::default();
     let mut materials: HashMap<String, Material> = HashMap::new();
     let mut runs: Vec<Run> = Vec::new();
     let mut obj_name = String::new();
@@ -144,6 +160,8 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
     let mut open: Option<usize> = None;
     let mut run_of: HashMap<(String, String), usize> = HashMap::new();
     let mut poly: Vec<u32> = Vec::new();
+    let mut poly_n: Vec<u32> = Vec::new();
+    let mut poly_t: Vec<u32> = Vec::new();
     let mut done = 0u64;
     for (i, line) in text.lines().enumerate() {
         let ln = i + 1;
@@ -166,23 +184,41 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
                 }
                 positions.push(v);
             }
+            Some("vn") => {
+                let n = Vec3::new(
+                    parse_f32(name, ln, w.next(), "normal x")?,
+                    parse_f32(name, ln, w.next(), "normal y")?,
+                    parse_f32(name, ln, w.next(), "normal z")?,
+                );
+                normals.push(n.normalize_or_zero());
+            }
+            Some("vt") => {
+                let u = parse_f32(name, ln, w.next(), "texture u")?;
+                // `vt u` alone is valid OBJ (v defaults to 0).
+                let v = if w.clone().next().is_some() { parse_f32(name, ln, w.next(), "texture v")? } else { 0.0 };
+                uvs.push(Vec2::new(u, v));
+            }
             Some("f") => {
                 poly.clear();
+                poly_n.clear();
+                poly_t.clear();
                 for tok in w {
-                    let first = tok.split('/').next().unwrap_or("");
-                    let idx: i64 = first.parse().map_err(|_| {
-                        SceneError::line(name, ln, format!("face vertex `{tok}` does not start with a vertex index"))
-                    })?;
-                    let n = positions.len() as i64;
-                    let abs = if idx > 0 { idx - 1 } else { n + idx };
-                    if idx == 0 || abs < 0 || abs >= n {
-                        return Err(SceneError::line(
-                            name,
-                            ln,
-                            format!("face refers to vertex {idx} but {n} vertices are defined so far"),
-                        ));
+                    let mut parts = tok.split('/');
+                    let first = parts.next().unwrap_or("");
+                    if first.parse::<i64>().is_err() {
+                        return Err(SceneError::line(name, ln, format!("face vertex `{tok}` does not start with a vertex index")));
                     }
-                    poly.push(abs as u32);
+                    poly.push(obj_index(name, ln, first, positions.len(), "vertex", "vertices")?);
+                    let t = parts.next().filter(|t| !t.is_empty());
+                    poly_t.push(match t {
+                        Some(t) => obj_index(name, ln, t, uvs.len(), "texture coordinate", "texture coordinates")?,
+                        None => NONE,
+                    });
+                    let n = parts.next().filter(|t| !t.is_empty());
+                    poly_n.push(match n {
+                        Some(n) => obj_index(name, ln, n, normals.len(), "normal", "normals")?,
+                        None => NONE,
+                    });
                 }
                 if poly.len() < 3 {
                     return Err(SceneError::line(name, ln, format!("face has {} vertices; at least 3 are needed", poly.len())));
@@ -194,7 +230,14 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
                     let k = match run_of.get(&key) {
                         Some(&k) => k,
                         None => {
-                            runs.push(Run { name: key.0.clone(), material: mat.clone(), triangles: Vec::new(), polygons: Vec::new() });
+                            runs.push(Run {
+                                name: key.0.clone(),
+                                material: mat.clone(),
+                                triangles: Vec::new(),
+                                normal_ids: Vec::new(),
+                                uv_ids: Vec::new(),
+                                polygons: Vec::new(),
+                            });
                             run_of.insert(key, runs.len() - 1);
                             runs.len() - 1
                         }
@@ -204,6 +247,8 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
                 let run = &mut runs[open.expect("a run is open")];
                 for k in 1..poly.len() - 1 {
                     run.triangles.push([poly[0], poly[k], poly[k + 1]]);
+                    run.normal_ids.push([poly_n[0], poly_n[k], poly_n[k + 1]]);
+                    run.uv_ids.push([poly_t[0], poly_t[k], poly_t[k + 1]]);
                 }
                 if run.material.emission.max_element() > 0.0 {
                     run.polygons.push(poly.clone());
@@ -215,13 +260,26 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
             }
             Some("usemtl") => {
                 let m = w.next().ok_or_else(|| SceneError::line(name, ln, "`usemtl` needs a material name"))?;
-                mat = materials.get(m).cloned().unwrap_or_else(|| Material { name: m.to_string(), ..Material::default() });
+                mat = match materials.get(m) {
+                    Some(found) => found.clone(),
+                    None => {
+                        if warned_missing.insert(m.to_string()) {
+                            let why = if libraries_given { "no material library given defines it" } else { "no material library was given" };
+                            tracing::warn!("{name}:{ln}: usemtl {m}: {why}; its faces get the default grey");
+                        }
+                        Material { name: m.to_string(), ..Material::default() }
+                    }
+                };
                 open = None;
             }
             Some("mtllib") => {
                 for lib in w {
-                    match others.iter().find(|f| base_name(&f.name) == base_name(lib)) {
-                        Some(f) => materials.extend(read_mtl(&f.name, &f.data)?),
+                    match super::files::find(files, lib) {
+                        Some(f) => {
+                            libraries_given = true;
+                            let f = super::files::ungzip(f)?;
+                            materials.extend(read_mtl(&f.name, &f.data)?)
+                        }
                         None => tracing::warn!("{name}:{ln}: material library {lib} was not given; using default materials"),
                     }
                 }
@@ -241,5 +299,5 @@ pub fn read(main: &NamedBytes, others: &[NamedBytes], progress: &dyn Progress) -
             r.name = format!("{}:{}", r.name, r.material.name);
         }
     }
-    Ok(ObjData { positions, runs })
+    Ok(ObjData { positions, normals, uvs, runs })
 }

@@ -85,7 +85,10 @@ impl LocalLight {
     pub fn new(light: &edgepoint_scene::Light, to_world: &Affine3A) -> LocalLight {
         let inv = to_world.inverse();
         match light {
-            edgepoint_scene::Light::Point { position, .. } => LocalLight::Point(inv.transform_point3(*position)),
+            // A spot light's shadows are a point light's (the cone only shades).
+            edgepoint_scene::Light::Point { position, .. } | edgepoint_scene::Light::Spot { position, .. } => {
+                LocalLight::Point(inv.transform_point3(*position))
+            }
             edgepoint_scene::Light::Area { vertices, .. } => {
                 let v: Vec<Vec3> = vertices.iter().map(|p| inv.transform_point3(*p)).collect();
                 // Recomputed in object space: a mirroring transform flips the winding.

@@ -669,7 +669,7 @@ const RECENT_MOVES: usize = 64;
 fn light_bound(l: &edgepoint_scene::Light) -> LightBound {
     let center = l.center();
     let radius = match l {
-        edgepoint_scene::Light::Point { .. } => 0.0,
+        edgepoint_scene::Light::Point { .. } | edgepoint_scene::Light::Spot { .. } => 0.0,
         edgepoint_scene::Light::Area { vertices, .. } => vertices.iter().map(|v| (*v - center).length()).fold(0.0, f32::max),
     };
     LightBound { center, radius }
