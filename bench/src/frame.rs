@@ -54,8 +54,8 @@ pub struct SceneArgs {
     #[arg(long = "shader-param", value_parser = parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Samples per pixel of the converged reference (default: 64 for `frame` and
-    /// `reference`, 16 for `motion`, which renders one per frame).
-    #[arg(long)]
+    /// `reference`, 16 for `motion`, which renders one per frame). Also `--spp`.
+    #[arg(long, visible_alias = "spp")]
     pub reference_spp: Option<u32>,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
     /// Default: $XDG_CACHE_HOME/edgepoint/references (else ~/.cache/edgepoint/references).
@@ -109,6 +109,10 @@ pub struct ReferenceArgs {
     /// never tone-mapped or clipped).
     #[arg(long, value_enum, default_value_t = FileFormat::Png)]
     pub format: FileFormat,
+    /// Also write the converged reference to FILE as linear RGB float EXR (never tone-mapped
+    /// or clipped), whatever `--format` says.
+    #[arg(long, value_name = "FILE")]
+    pub exr: Option<PathBuf>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -389,13 +393,22 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
         let conv = args.out.join(format!("reference_{}spp", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
         let conv = write_image(&conv, args.format, a.width, a.height, &refs.converged.pixels)?;
         let one = write_image(&args.out.join("reference_1spp"), args.format, a.width, a.height, &refs.one_spp.pixels)?;
+        let mut files = vec![conv.display().to_string(), one.display().to_string()];
+        if let Some(path) = &args.exr {
+            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)?;
+            }
+            edgepoint_viewer::exr_file::write_f32(path, a.width, a.height, &refs.converged.pixels)
+                .with_context(|| format!("writing {}", path.display()))?;
+            files.push(path.display().to_string());
+        }
         let out = json!({
             "scene": a.scene, "width": a.width, "height": a.height, "workers": a.workers,
             "reference_spp": a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP),
             "converged_s": refs.converged.elapsed.as_secs_f64(), "converged_cached": refs.converged_cached,
             "full_rt_1spp_s": refs.one_spp.elapsed.as_secs_f64(),
             "psnr_1spp_vs_converged_db": psnr(&refs.one_spp.pixels, &refs.converged.pixels),
-            "files": [conv.display().to_string(), one.display().to_string()],
+            "files": files,
         });
         let table = format!(
             "references of {} at {}x{}: {}spp in {:.2} s{}, 1spp in {:.2} s ({:.2} dB vs converged)\n  {}\n  {}\n",
@@ -403,7 +416,7 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
             if refs.converged_cached { " (cached)" } else { "" },
             refs.one_spp.elapsed.as_secs_f64(), out["psnr_1spp_vs_converged_db"].as_f64().unwrap_or(0.0),
             conv.display(), one.display()
-        );
+        ) + &args.exr.as_ref().map(|p| format!("  {}\n", p.display())).unwrap_or_default();
         crate::emit(args.json, &out, &table);
         Ok(())
     })
