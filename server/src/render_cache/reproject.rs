@@ -288,22 +288,13 @@ impl RenderCache {
         let ctx = RowContext::new(&self.zbufs[0], &self.zmin_row, &self.proj, &self.pool, self.frame, w, h, geometry);
         let pi = &mut self.points;
         let frame = self.frame;
-        let (dc, ds) = (
-            pi.point.par_chunks_mut(w),
-            pi.depth.par_chunks_mut(w),
-            pi.subpixel.par_chunks_mut(w),
-            pi.color.par_chunks_mut(w),
-            pi.age.par_chunks_mut(w),
-            pi.born.par_chunks_mut(w),
-            self.status.par_chunks_mut(w),
-            self.recompute.par_chunks(words),
-            self.give_way.par_chunks(words),
-        )
-            .into_par_iter()
+        let (dc, ds) = rows(pi, &mut self.status, w)
+            .zip(self.recompute.par_chunks(words))
+            .zip(self.give_way.par_chunks(words))
             .enumerate()
-            .map(|(y, (pt, dp, sp, col, ag, bo, st, bits, changed))| {
+            .map(|(y, ((mut r, bits), changed))| {
                 // Ages first (a stale point's stays STALE_AGE; a missing point's infinity).
-                for (a, &b) in ag.iter_mut().zip(bo.iter()) {
+                for (a, &b) in r.ag.iter_mut().zip(r.bo.iter()) {
                     if *a < STALE_AGE {
                         *a = RenderCache::age_of(frame, b);
                     }
@@ -314,20 +305,20 @@ impl RenderCache {
                     while b != 0 {
                         let x = k * 64 + b.trailing_zeros() as usize;
                         b &= b - 1;
-                        let (old, old_point) = (st[x], pt[x]);
-                        let kept = cull_pixel(&ctx, y, x, pt, dp, st);
+                        let (old, old_point) = (r.st[x], r.pt[x]);
+                        let kept = cull_pixel(&ctx, y, x, &mut r);
                         // Around a changed pixel the nearest point is the same one: only
                         // whether it is culled may change (the point read costs a cache miss).
-                        let same = changed[k] & (1 << (x % 64)) == 0 && old_point == pt[x];
+                        let same = changed[k] & (1 << (x % 64)) == 0 && old_point == r.pt[x];
                         if same {
-                            st[x] |= old & STATUS_STALE;
+                            r.st[x] |= old & STATUS_STALE;
                         } else if kept {
-                            fill_pixel(&ctx, x, pt, sp, col, ag, bo, st);
+                            fill_pixel(&ctx, x, &mut r);
                         } else {
-                            clear_pixel(x, sp, col, ag, bo);
+                            clear_pixel(x, &mut r);
                         }
-                        dc += i64::from(st[x] & STATUS_CULLED) - i64::from(old & STATUS_CULLED);
-                        ds += i64::from((st[x] & STATUS_STALE) >> 1) - i64::from((old & STATUS_STALE) >> 1);
+                        dc += i64::from(r.st[x] & STATUS_CULLED) - i64::from(old & STATUS_CULLED);
+                        ds += i64::from((r.st[x] & STATUS_STALE) >> 1) - i64::from((old & STATUS_STALE) >> 1);
                     }
                 }
                 (dc, ds)
@@ -344,18 +335,9 @@ impl RenderCache {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
         let ctx = RowContext::new(&self.zbufs[0], &self.zmin_row, &self.proj, &self.pool, self.frame, w, h, geometry);
         let pi = &mut self.points;
-        let counts = (
-            pi.point.par_chunks_mut(w),
-            pi.depth.par_chunks_mut(w),
-            pi.subpixel.par_chunks_mut(w),
-            pi.color.par_chunks_mut(w),
-            pi.age.par_chunks_mut(w),
-            pi.born.par_chunks_mut(w),
-            self.status.par_chunks_mut(w),
-        )
-            .into_par_iter()
+        let counts = rows(pi, &mut self.status, w)
             .enumerate()
-            .map(|(y, (pt, dp, sp, col, ag, bo, st))| build_row(&ctx, y, pt, dp, sp, col, ag, bo, st))
+            .map(|(y, mut r)| build_row(&ctx, y, &mut r))
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         let (culled, stale) = counts;
         self.stale_shown = stale;
@@ -500,19 +482,18 @@ impl<'a> RowContext<'a> {
 /// gathers of the second are independent of each other and short, so many of their cache
 /// misses overlap (pool regions keep them local).
 #[inline(never)]
-#[allow(clippy::too_many_arguments)]
-fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32], st: &mut [u8]) -> (u32, u32) {
+fn build_row(c: &RowContext, y: usize, r: &mut Row) -> (u32, u32) {
     let (mut culled, mut stale) = (0u32, 0u32);
     for x in 0..c.w {
-        cull_pixel(c, y, x, pt, dp, st);
-        culled += u32::from(st[x] & STATUS_CULLED);
+        cull_pixel(c, y, x, r);
+        culled += u32::from(r.st[x] & STATUS_CULLED);
     }
     for x in 0..c.w {
-        if pt[x] == NO_POINT {
-            clear_pixel(x, sp, col, ag, bo);
+        if r.pt[x] == NO_POINT {
+            clear_pixel(x, r);
         } else {
-            fill_pixel(c, x, pt, sp, col, ag, bo, st);
-            stale += u32::from(st[x] >> 1);
+            fill_pixel(c, x, r);
+            stale += u32::from(r.st[x] >> 1);
         }
     }
     (culled, stale)
@@ -522,8 +503,9 @@ fn build_row(c: &RowContext, y: usize, pt: &mut [u32], dp: &mut [f32], sp: &mut 
 /// geometry or as occluded by its neighbours. Writes `pt`, `dp` and `st` (the culled bit;
 /// the stale bit is [`fill_pixel`]'s); returns whether a point is kept.
 #[inline(always)]
-fn cull_pixel(c: &RowContext, y: usize, x: usize, pt: &mut [u32], dp: &mut [f32], st: &mut [u8]) -> bool {
+fn cull_pixel(c: &RowContext, y: usize, x: usize, r: &mut Row) -> bool {
     let (w, h) = (c.w, c.h);
+    let (pt, dp, st) = (&mut *r.pt, &mut *r.dp, &mut *r.st);
     let key = c.zbuf[y * w + x];
     pt[x] = NO_POINT;
     dp[x] = f32::INFINITY;
@@ -557,9 +539,9 @@ fn cull_pixel(c: &RowContext, y: usize, x: usize, pt: &mut [u32], dp: &mut [f32]
 
 /// The point image at pixel `x` of the row for its kept point `pt[x]`.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn fill_pixel(c: &RowContext, x: usize, pt: &[u32], sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32], st: &mut [u8]) {
-    let i = pt[x] as usize;
+fn fill_pixel(c: &RowContext, x: usize, r: &mut Row) {
+    let (sp, col, ag, bo, st) = (&mut *r.sp, &mut *r.col, &mut *r.ag, &mut *r.bo, &mut *r.st);
+    let i = r.pt[x] as usize;
     let pr = c.proj[i];
     sp[x] = [f32::from(pr.fx) * (1.0 / 65536.0), f32::from(pr.fy) * (1.0 / 65536.0)];
     let sh = c.shade[i];
@@ -572,9 +554,35 @@ fn fill_pixel(c: &RowContext, x: usize, pt: &[u32], sp: &mut [[f32; 2]], col: &m
 
 /// The point image at pixel `x` of the row without a point.
 #[inline(always)]
-fn clear_pixel(x: usize, sp: &mut [[f32; 2]], col: &mut [Vec3], ag: &mut [f32], bo: &mut [u32]) {
-    sp[x] = [0.0; 2];
-    col[x] = Vec3::ZERO;
-    ag[x] = f32::INFINITY;
-    bo[x] = 0;
+fn clear_pixel(x: usize, r: &mut Row) {
+    r.sp[x] = [0.0; 2];
+    r.col[x] = Vec3::ZERO;
+    r.ag[x] = f32::INFINITY;
+    r.bo[x] = 0;
+}
+
+/// One row of the point image's arrays and of the pass-2 status.
+struct Row<'a> {
+    pt: &'a mut [u32],
+    dp: &'a mut [f32],
+    sp: &'a mut [[f32; 2]],
+    col: &'a mut [Vec3],
+    ag: &'a mut [f32],
+    bo: &'a mut [u32],
+    st: &'a mut [u8],
+}
+
+/// The rows of `pi` and `status` (`w` pixels each), for the row-parallel passes.
+fn rows<'a>(pi: &'a mut super::PointImage, status: &'a mut [u8], w: usize) -> impl IndexedParallelIterator<Item = Row<'a>> + 'a {
+    (
+        pi.point.par_chunks_mut(w),
+        pi.depth.par_chunks_mut(w),
+        pi.subpixel.par_chunks_mut(w),
+        pi.color.par_chunks_mut(w),
+        pi.age.par_chunks_mut(w),
+        pi.born.par_chunks_mut(w),
+        status.par_chunks_mut(w),
+    )
+        .into_par_iter()
+        .map(|(pt, dp, sp, col, ag, bo, st)| Row { pt, dp, sp, col, ag, bo, st })
 }
