@@ -16,18 +16,6 @@ fn shade_one(scene: Scene, origin: Vec3, target: Vec3, params: &[(&str, f64)]) -
     shade_batch(&loaded, &inst, &spec, 42, &[r])
 }
 
-/// Irradiance at `p` (normal `n`) from a uniform polygon of radiance 1: Lambert's formula.
-fn polygon_irradiance(p: Vec3, n: Vec3, poly: &[Vec3]) -> f32 {
-    let mut e = 0.0;
-    for i in 0..poly.len() {
-        let a = (poly[i] - p).normalize();
-        let b = (poly[(i + 1) % poly.len()] - p).normalize();
-        let beta = a.dot(b).clamp(-1.0, 1.0).acos();
-        e += 0.5 * beta * n.dot(a.cross(b).normalize());
-    }
-    e.abs()
-}
-
 #[test]
 fn point_light_on_a_plane_is_exact() {
     let i = Vec3::new(2.0, 1.5, 1.0);
