@@ -165,9 +165,16 @@ impl Sampler {
     pub fn bytes_for(width: u32, height: u32) -> usize {
         let (w, n) = (width as usize, width as usize * height as usize);
         let bands = (height as usize).div_ceil(DITHER_BAND_ROWS);
-        // Priorities and row sums; per band its rows' buffers; the bands' picks, at most
-        // one per pixel.
-        4 * n + 8 * height as usize + bands * (2 * 4 * (w + 2) + 2 * 4 * w) + std::mem::size_of::<PixelRequest>() * n
+        // Priorities and row sums; per band its rows' buffers.
+        4 * n + 8 * height as usize + bands * (2 * 4 * (w + 2) + 2 * 4 * w)
+    }
+
+    /// Bytes the bands' picks grow to at most (they start empty): a band picks a pixel of
+    /// its rows and of its warm-up rows at most once.
+    pub fn picks_bytes_for(width: u32, height: u32) -> usize {
+        let bands = (height as usize).div_ceil(DITHER_BAND_ROWS);
+        let rows = height as usize + bands.saturating_sub(1) * DITHER_WARM_UP_ROWS;
+        std::mem::size_of::<PixelRequest>() * rows * width as usize
     }
 
     pub fn new(width: u32, height: u32, seed: u64) -> Self {

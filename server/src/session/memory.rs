@@ -44,6 +44,7 @@ impl SessionMemory {
             ("exact visibility", Visibility::bytes_for(width, height)),
             ("baseline hole fill", BaselineHoles::bytes_for(width as usize, height as usize)),
             ("sampling priorities", Sampler::bytes_for(width, height)),
+            ("sampling picks", Sampler::picks_bytes_for(width, height)),
             ("request ring", RequestRing::bytes_for(ring_capacity(settings, pixels))),
             ("frames in flight", (FRAMES_IN_FLIGHT * 4 + FRAME_BYTES_PER_PIXEL) * pixels),
         ];
