@@ -23,6 +23,8 @@ static LIVE: AtomicIsize = AtomicIsize::new(0);
 static PEAK: AtomicIsize = AtomicIsize::new(0);
 static LARGEST: AtomicUsize = AtomicUsize::new(0);
 static TOTAL: AtomicUsize = AtomicUsize::new(0);
+/// Allocations and frees seen while counting (for [`settle`]).
+static EVENTS: AtomicUsize = AtomicUsize::new(0);
 
 #[inline]
 fn grew(by: usize) {
@@ -30,11 +32,13 @@ fn grew(by: usize) {
     PEAK.fetch_max(now, Ordering::Relaxed);
     LARGEST.fetch_max(by, Ordering::Relaxed);
     TOTAL.fetch_add(by, Ordering::Relaxed);
+    EVENTS.fetch_add(1, Ordering::Relaxed);
 }
 
 #[inline]
 fn shrank(by: usize) {
     LIVE.fetch_sub(by as isize, Ordering::Relaxed);
+    EVENTS.fetch_add(1, Ordering::Relaxed);
 }
 
 // SAFETY: every method forwards to `System` with the caller's arguments unchanged; the
@@ -112,4 +116,24 @@ pub fn measure<R>(f: impl FnOnce() -> R) -> (R, Usage) {
         total: TOTAL.load(Ordering::Relaxed),
     };
     (r, usage)
+}
+
+/// Waits (at most `limit`) until no thread has allocated or freed anything for five
+/// consecutive 10 ms windows. Threads of earlier work wind down on their own time — a
+/// dropped rayon pool's or tokio runtime's threads free their buffers after the drop
+/// returns — and their frees would count against the next measurement; an exact
+/// measurement in a binary that ran such work settles first. Returns whether it settled.
+pub fn settle(limit: std::time::Duration) -> bool {
+    let start = std::time::Instant::now();
+    ON.store(true, Ordering::SeqCst);
+    let mut quiet = 0;
+    let mut last = EVENTS.load(Ordering::Relaxed);
+    while quiet < 5 && start.elapsed() < limit {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+        let now = EVENTS.load(Ordering::Relaxed);
+        quiet = if now == last { quiet + 1 } else { 0 };
+        last = now;
+    }
+    ON.store(false, Ordering::SeqCst);
+    quiet >= 5
 }

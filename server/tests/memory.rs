@@ -5,7 +5,7 @@
 //! session beside them, fails here. (Own test binary: the counters are global.)
 mod common;
 
-use edgepoint_scene::alloc_count::{measure, CountingAlloc};
+use edgepoint_scene::alloc_count::{self, CountingAlloc, Usage};
 use edgepoint_scene::Camera;
 use edgepoint_server::epi::spread::BaselineHoles;
 use edgepoint_server::epi::{Epi, InterpOptions};
@@ -24,6 +24,16 @@ static ALLOC: CountingAlloc = CountingAlloc;
 
 /// One measurement at a time (the counters see every thread).
 static ONE: Mutex<()> = Mutex::new(());
+
+/// A measurement that nothing else in this binary disturbs: the global rayon pool exists
+/// already (its threads and queues are built on first use, which is not the measured
+/// structure's memory), and threads of an earlier test (the session test's worker pool and
+/// runtimes wind down after it returns) have stopped freeing.
+fn measure<R>(f: impl FnOnce() -> R) -> (R, Usage) {
+    rayon::broadcast(|_| ());
+    assert!(alloc_count::settle(std::time::Duration::from_secs(10)), "the allocator never went quiet");
+    alloc_count::measure(f)
+}
 
 const SIZES: &[(u32, u32)] = &[(64, 48), (333, 257), (512, 512), (1000, 100)];
 
