@@ -91,6 +91,11 @@ pub struct QualityArgs {
     /// Turn the complex filter off.
     #[arg(long)]
     pub no_complex_filter: bool,
+    /// Diagnosis: print how the EPI saw pixel X,Y and its 3 × 3 neighbours (flags, code,
+    /// region, crossing masks, point, reconstructed colour and the reference) for every
+    /// scene and density
+    #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
+    pub explain: Option<(usize, usize)>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -180,6 +185,14 @@ pub fn run(args: QualityArgs) -> Result<()> {
                 fill.fill(points, epi.holes(), image);
             }
             let epr = cache.image().to_vec();
+            if let Some((x, y)) = args.explain {
+                if x < w as usize && y < h as usize {
+                    let r = reference[y * w as usize + x];
+                    eprintln!("{tag} at {:.1}% density, pixel ({x},{y}), reference ({:.3},{:.3},{:.3}):\n{}", density * 100.0, r.x, r.y, r.z, epi.explain(x, y, 1, cache.point_image(), &epr));
+                } else {
+                    eprintln!("--explain {x},{y} is outside the {w}x{h} image");
+                }
+            }
             let (pb, pe) = (psnr(&baseline, &reference), psnr(&epr, &reference));
             let (sb, se) = (ssim(&baseline, &reference, w, h), ssim(&epr, &reference, w, h));
             // PSNR away from hard shadow boundaries, and the share of the squared error at them.
@@ -273,4 +286,10 @@ pub fn run(args: QualityArgs) -> Result<()> {
     });
     crate::emit(args.json, &out, &table);
     Ok(())
+}
+
+fn parse_pixel(s: &str) -> Result<(usize, usize), String> {
+    let (x, y) = s.split_once(',').ok_or_else(|| format!("'{s}' is not X,Y"))?;
+    let p = |v: &str| v.trim().parse::<usize>().map_err(|_| format!("'{v}' in '{s}' is not a pixel coordinate"));
+    Ok((p(x)?, p(y)?))
 }

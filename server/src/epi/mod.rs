@@ -29,6 +29,7 @@ pub mod antialias;
 pub mod code;
 pub mod complex;
 pub mod depth;
+pub mod explain;
 pub mod interpolate;
 pub mod overlay;
 pub mod raster;
@@ -311,7 +312,7 @@ impl Epi {
         let mut complex_refined = 0;
         if complex_filter && !self.bounds.centres.is_empty() {
             complex_refined = times.time(STAGE_COMPLEX, || {
-                let input = complex::ComplexInput { bounds: &self.bounds, pixels: &self.pixels, flags: &self.flags, points, sigma: options.sigma };
+                let input = complex::ComplexInput { bounds: &self.bounds, pixels: &self.pixels, flags: &self.flags, points, filled: &self.filled, sigma: options.sigma };
                 complex::complex_filter(&input, image)
             });
         }
