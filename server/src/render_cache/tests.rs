@@ -949,7 +949,13 @@ fn still_view_lockstep(with_geometry: bool) {
                 s.normal = if rng.chance(0.2) { d } else { -d };
                 s
             };
-            let s = at(s, x as u32, y as u32);
+            let mut s = at(s, x as u32, y as u32);
+            // Some samples re-shade the point their pixel shows (converge.rs): averaged into
+            // it, or replacing it when it is stale.
+            let shown = inc.point_image().point[(y as u32 * w + x as u32) as usize];
+            if let Some(p) = inc.point(shown).filter(|_| rng.chance(0.3)) {
+                (s.hit, s.position, s.object, s.epoch) = (p.hit, p.position, p.object, p.epoch);
+            }
             let stale = rng.chance(0.05);
             assert_eq!(inc.insert_aged(&s, stale), full.insert_aged(&s, stale));
         }
@@ -986,6 +992,7 @@ fn still_view_lockstep(with_geometry: bool) {
     }
     assert!(still_frames >= 25, "most frames took the still-view path ({still_frames})");
     assert!(in_place_frames >= 20, "most still frames updated the point image in place ({in_place_frames})");
+    assert!(inc.averaged() > 300, "samples were averaged into points ({})", inc.averaged());
 }
 
 #[test]

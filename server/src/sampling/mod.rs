@@ -160,6 +160,27 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
     }
 }
 
+/// Converging at rest (issue 14 item 3, `render_cache/converge.rs`): a pick of a pixel that
+/// shows a fresh point, whose sample the reconstruction can use (`usable(x, y)`), is aimed
+/// at that point's position inside the pixel instead of a jittered one. The worker then
+/// shades the same surface point again, and the cache averages the new sample into it. A
+/// pixel without a point, with a stale one (something changed it: it is replaced, not
+/// averaged), or whose sample is edge-ambiguous or in a complex pixel keeps its jittered
+/// position, so new points still land elsewhere in it.
+pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::PointImage, usable: impl Fn(u32, u32) -> bool) {
+    let w = points.width as usize;
+    for p in picks.iter_mut() {
+        let i = p.y as usize * w + p.x as usize;
+        if points.point.get(i).is_some_and(|&j| j != crate::render_cache::NO_POINT)
+            && points.age[i] < crate::render_cache::STALE_AGE
+            && usable(p.x, p.y)
+        {
+            let [u, v] = points.subpixel[i];
+            (p.sx, p.sy) = (inside_pixel(p.x, u), inside_pixel(p.y, v));
+        }
+    }
+}
+
 impl Sampler {
     /// Bytes [`Self::new`] allocates for a `width` × `height` image.
     pub fn bytes_for(width: u32, height: u32) -> usize {
