@@ -6,9 +6,10 @@
 //! that point with the count of samples it holds, so the point's noise falls as 1/√n
 //! instead of staying at one sample's noise, as a progressive renderer's pixels do.
 //!
-//! "Its" point is found exactly and in O(1): the point the last frame showed at the sample's
-//! pixel, when it lies on the same object (or is the same background direction) within
-//! [`SAME_POINT_RELATIVE`] of the sample's position. The sample is averaged in only while
+//! "Its" point is the one the request was aimed at (the session remembers it with the
+//! request), when the last frame still showed it at the sample's pixel and it lies on the
+//! same object (or is the same background direction) within [`SAME_POINT_RELATIVE`] of the
+//! sample's position: exact, and O(1). The sample is averaged in only while
 //! nothing can have changed the point's shading since it was shaded: the point is not stale
 //! (its object moved, a moved object may shadow it) and the sample was shaded at the point's
 //! epoch (no object moved in between). Otherwise the sample replaces the point as a new
@@ -26,19 +27,34 @@ use glam::Vec3;
 pub const SAME_POINT_RELATIVE: f32 = 1e-4;
 
 impl RenderCache {
-    /// The slot of the point the last frame showed at `s`'s pixel, and that pixel's index,
-    /// when `s` is a sample of that surface point (see the module doc).
-    pub(super) fn own_point(&self, s: &Sample) -> Option<(usize, usize)> {
+    /// [`Self::insert_aged`] for a sample whose request was aimed at cached point `point`
+    /// (`sampling::aim_at_points`; [`NO_POINT`]: none): when it is a sample of that point,
+    /// it is averaged into it while nothing changed since the point was shaded, else it
+    /// replaces it (see the module doc). Any other sample is inserted as a new point.
+    pub fn insert_aimed(&mut self, s: &Sample, stale: bool, point: u32) -> bool {
+        if !(s.position.is_finite() && s.color.is_finite()) {
+            return false;
+        }
+        match self.own_point(s, point).filter(|_| !stale) {
+            Some((i, pixel)) if self.may_average(i, s) => self.average_into(i, pixel, s),
+            Some((i, _)) => return self.write(i as u32, self.region_of(i as u32), s, false),
+            None => return self.insert_aged(s, stale),
+        }
+        true
+    }
+
+    /// Slot `point` and the index of `s`'s pixel, when the last frame showed that point at
+    /// the pixel and `s` is a sample of the same surface point (module doc).
+    fn own_point(&self, s: &Sample, point: u32) -> Option<(usize, usize)> {
         let [x, y] = s.pixel;
-        if x >= self.cfg.width || y >= self.cfg.height {
+        if point == NO_POINT || x >= self.cfg.width || y >= self.cfg.height {
             return None;
         }
         let pixel = y as usize * self.cfg.width as usize + x as usize;
-        let j = *self.points.point.get(pixel)?;
-        if j == NO_POINT {
+        if self.points.point[pixel] != point {
             return None;
         }
-        let i = j as usize;
+        let i = point as usize;
         let p = &self.pool;
         let flags = p.flags[i];
         if flags & FLAG_VALID == 0 || (flags & FLAG_HIT != 0) != s.hit || p.object[i] != s.object {
@@ -52,7 +68,7 @@ impl RenderCache {
 
     /// Whether sample `s` of point `i` may be averaged into it: nothing changed its shading
     /// in between (module doc).
-    pub(super) fn may_average(&self, i: usize, s: &Sample) -> bool {
+    fn may_average(&self, i: usize, s: &Sample) -> bool {
         self.pool.flags[i] & FLAG_STALE == 0 && self.pool.epoch[i] == s.epoch
     }
 
@@ -60,7 +76,7 @@ impl RenderCache {
     /// becomes the mean of its samples (after `u16::MAX` samples, a running mean over about
     /// that many), it counts as freshly shaded, and it goes to the young end of replacement.
     /// Its place is unchanged, so the point image is updated in place.
-    pub(super) fn average_into(&mut self, i: usize, pixel: usize, s: &Sample) {
+    fn average_into(&mut self, i: usize, pixel: usize, s: &Sample) {
         self.averaged += 1;
         let p = &mut self.pool;
         let n = p.samples[i].saturating_add(1);

@@ -486,11 +486,9 @@ impl RenderCache {
         &self.cfg
     }
 
-    /// Stores a sample in the fixed pool. A sample of the surface point the last frame showed
-    /// at its pixel goes to that point (`converge.rs`): averaged into it while nothing changed
-    /// since the point was shaded, else replacing it. Any other sample goes to the region of
-    /// its pixel's row band, replacing (in this order) an invalid slot, a point that was
-    /// hidden in the last frame, or the oldest point. Hidden points are looked for with a clock hand that examines a bounded number
+    /// Stores a sample in the fixed pool, in the region of its pixel's row band, replacing (in
+    /// this order) an invalid slot, a point that was hidden in the last frame, or the oldest
+    /// point. (A sample aimed at a cached point goes in by [`Self::insert_aimed`].) Hidden points are looked for with a clock hand that examines a bounded number
     /// of slots per insert, so when hidden points are rare an insert may take the oldest
     /// point although a hidden one exists elsewhere in the region. A pixel row beyond the
     /// image counts as the last row. Returns `false` (and stores
@@ -506,16 +504,6 @@ impl RenderCache {
     pub fn insert_aged(&mut self, s: &Sample, stale: bool) -> bool {
         if !s.position.is_finite() || !s.color.is_finite() || (!s.hit && s.position.length_squared() < 1e-12) {
             return false;
-        }
-        if !stale {
-            if let Some((i, pixel)) = self.own_point(s) {
-                if self.may_average(i, s) {
-                    self.average_into(i, pixel, s);
-                } else {
-                    self.write(i as u32, self.region_of(i as u32), s, false);
-                }
-                return true;
-            }
         }
         let band = (s.pixel[1] / BAND_ROWS).min(self.regions.len() as u32 - 1) as usize;
         let Some(slot) = self.take_slot(band) else { return false };

@@ -952,12 +952,13 @@ fn still_view_lockstep(with_geometry: bool) {
             let mut s = at(s, x as u32, y as u32);
             // Some samples re-shade the point their pixel shows (converge.rs): averaged into
             // it, or replacing it when it is stale.
+            let mut aimed = NO_POINT;
             let shown = inc.point_image().point[(y as u32 * w + x as u32) as usize];
             if let Some(p) = inc.point(shown).filter(|_| rng.chance(0.3)) {
-                (s.hit, s.position, s.object, s.epoch) = (p.hit, p.position, p.object, p.epoch);
+                (s.hit, s.position, s.object, s.epoch, aimed) = (p.hit, p.position, p.object, p.epoch, shown);
             }
             let stale = rng.chance(0.05);
-            assert_eq!(inc.insert_aged(&s, stale), full.insert_aged(&s, stale));
+            assert_eq!(inc.insert_aimed(&s, stale, aimed), full.insert_aimed(&s, stale, aimed));
         }
         full.reproject_all = true;
         still_frames += usize::from(!inc.reproject_all && inc.last_view.is_some());

@@ -594,7 +594,7 @@ impl FrameLoop {
                     self.counters.nonfinite += 1;
                     continue;
                 }
-                if self.cache.insert_aged(&sample, stale) {
+                if self.cache.insert_aimed(&sample, stale, info.point) {
                     inserted += 1;
                 }
             }

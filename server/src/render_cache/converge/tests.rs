@@ -60,7 +60,7 @@ fn aimed_picks(c: &RenderCache, rng: &mut Rng) -> Vec<PixelRequest> {
     let mut picks: Vec<PixelRequest> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .filter(|&(x, y)| pi.point[(y * w + x) as usize] != NO_POINT)
-        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.5, sy: y as f32 + 0.5 })
+        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.5, sy: y as f32 + 0.5, point: NO_POINT })
         .collect();
     for p in &mut picks {
         (p.sx, p.sy) = (p.x as f32 + rng.unit(), p.y as f32 + rng.unit());
@@ -91,7 +91,7 @@ fn a_point_re_shaded_n_times_holds_the_mean_of_its_samples() {
             let color = Vec3::new(0.3, 0.5, 0.7) + rng.vec3(-0.3, 0.3);
             let i = (p.y * w + p.x) as usize;
             sums[i] += color.as_dvec3();
-            assert!(c.insert(&shade(&cam, [p.x, p.y], (p.sx, p.sy), color, 1)));
+            assert!(c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), color, 1), false, p.point));
         }
         c.reproject_points(&cam, None, &mut StageTimes::new());
         assert_eq!(c.point_image().point, shown, "averaging keeps every point in its place");
@@ -154,7 +154,7 @@ fn a_pixel_s_variance_falls_as_one_over_its_samples_over_still_frames() {
         sampler.select(c.filter_weights(), &c.point_image().age, &cfg, n_px / 4, &mut picks);
         aim_at_points(&mut picks, c.point_image(), |_, _| true);
         for p in &picks {
-            c.insert(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noisy(&mut rng), 1));
+            c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noisy(&mut rng), 1), false, p.point);
         }
     }
     // 95 frames × 1/4 of the pixels: about 24 samples a point.
@@ -170,7 +170,7 @@ fn changes_reset_the_count_and_other_samples_do_not_join_a_point() {
     first_samples(&mut c, &cam, &mut rng, |_| Vec3::splat(0.25));
     for _ in 0..3 {
         for p in aimed_picks(&c, &mut rng) {
-            c.insert(&shade(&cam, [p.x, p.y], (p.sx, p.sy), Vec3::splat(0.25), 1));
+            c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), Vec3::splat(0.25), 1), false, p.point);
         }
         c.reproject_points(&cam, None, &mut StageTimes::new());
     }
@@ -190,17 +190,23 @@ fn changes_reset_the_count_and_other_samples_do_not_join_a_point() {
     let [x, y] = xy(on_plane);
     let [u, v] = pi.subpixel[on_plane];
     let away = (x as f32 + if u < 0.5 { u + 0.4 } else { u - 0.4 }, y as f32 + v);
+    let plane_point = pi.point[on_plane];
     let before = c.averaged();
-    c.insert(&shade(&cam, [x, y], away, Vec3::ONE, 1));
-    assert_eq!(c.averaged(), before, "a jittered sample a part of a pixel away");
+    c.insert_aimed(&shade(&cam, [x, y], away, Vec3::ONE, 1), false, plane_point);
+    assert_eq!(c.averaged(), before, "a sample a part of a pixel away");
     assert_eq!(count(&c, on_plane), Some(4));
     // Another object's sample at the same place is not (it cannot be the same point).
     let mut other = shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1);
     other.object = 7;
-    c.insert(&other);
+    c.insert_aimed(&other, false, plane_point);
     assert_eq!(c.averaged(), before);
+    // Nor is a sample of the point that was not aimed at it (a jittered pick that happens to
+    // land there), nor one aimed at a point another pixel shows.
+    c.insert(&shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1));
+    c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1), false, pi.point[on_plane + 1]);
+    assert_eq!((c.averaged(), count(&c, on_plane)), (before, Some(4)));
     // A sample of a later epoch (an object moved meanwhile) replaces the point: count 1.
-    c.insert(&shade(&cam, [x, y], aim(on_plane), Vec3::splat(0.75), 2));
+    c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::splat(0.75), 2), false, plane_point);
     let p = c.point(pi.point[on_plane]).unwrap();
     assert_eq!((p.samples, p.color, p.epoch), (1, Vec3::splat(0.75), 2), "replaced in place");
     assert_eq!(c.averaged(), before);
@@ -216,12 +222,12 @@ fn changes_reset_the_count_and_other_samples_do_not_join_a_point() {
     // Shaded where the sphere is now (its carried point), at the same epoch.
     let mut s = shade(&cam, [sx, sy], aimed, Vec3::splat(0.9), 1);
     s.position = carried.position;
-    c.insert(&s);
+    c.insert_aimed(&s, false, slot);
     let p = c.point(slot).unwrap();
     assert_eq!((p.samples, p.color, p.age), (1, Vec3::splat(0.9), 0.0), "a stale point is replaced, not averaged");
     // A stale sample never joins a point either.
     let before = c.len();
-    assert!(c.insert_aged(&shade(&cam, [x, y], aim(on_plane), Vec3::ZERO, 2), true));
+    assert!(c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::ZERO, 2), true, plane_point));
     assert_eq!(c.point(pi.point[on_plane]).unwrap().samples, 1);
     assert_eq!(c.len(), before + 1, "it became a point of its own");
     // Removing the plane's points removes their counts with them.
@@ -245,7 +251,7 @@ fn picks_aim_only_at_fresh_usable_points() {
     let pi = c.point_image().clone();
     let jittered: Vec<PixelRequest> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.123, sy: y as f32 + 0.877 })
+        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.123, sy: y as f32 + 0.877, point: NO_POINT })
         .collect();
     let mut picks = jittered.clone();
     // Row 0 unusable (as edge-ambiguous samples are).
