@@ -10,7 +10,7 @@
 //!   (pixels without one are black). The workers load the scene before its time starts.
 //!
 //! The verdict says whether edge-and-point is ahead (higher PSNR) at every time point.
-use crate::frame::{converged_reference, open_dispatcher, start_cluster, start_message, SceneArgs};
+use crate::frame::{converged_reference, open_dispatcher, start_cluster, start_message, PaceArgs, SceneArgs};
 use crate::inprocess::write_image;
 use anyhow::{bail, Context, Result};
 use edgepoint_proto as pb;
@@ -45,12 +45,9 @@ pub struct ConvergeArgs {
     /// Seconds between time points (there are two more, at 1/4 and 1/2 of it).
     #[arg(long, default_value_t = 1.0)]
     pub interval: f64,
-    /// Pixels per new sample per frame of the edge-and-point session (server default 64).
-    #[arg(long)]
-    pub sparseness: Option<f64>,
-    /// Frame-rate cap of the edge-and-point session's frame loop (server default 30).
-    #[arg(long)]
-    pub max_fps: Option<f64>,
+    /// The edge-and-point session's pace.
+    #[command(flatten)]
+    pub pace: PaceArgs,
     /// Write both renderers' last images and the reference into this directory (PNG, or
     /// linear float EXR with --format exr).
     #[arg(long)]
@@ -248,8 +245,7 @@ async fn session_run(
 ) -> Result<(Vec<Point>, Vec<Vec3>, u64)> {
     let a = &args.scene;
     let n = a.width as usize * a.height as usize;
-    let settings = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
-    let mut start = start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
+    let mut start = start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), args.pace.settings());
     start.encoding = pb::FrameEncoding::LinearHalfLz4 as i32;
     let (mut client, _started) = SessionClient::connect(&cluster.server_url(), start).await?;
     let t0 = Instant::now();

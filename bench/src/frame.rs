@@ -54,7 +54,8 @@ pub struct SceneArgs {
     #[arg(long = "shader-param", value_parser = parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Samples per pixel of the converged reference (default: 64 for `frame` and
-    /// `reference`, 16 for `motion`, which renders one per frame). Also `--spp`.
+    /// `reference`, 16 for `motion`, which renders one per frame, 1024 for `converge`). Also
+    /// `--spp`.
     #[arg(long, visible_alias = "spp")]
     pub reference_spp: Option<u32>,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
@@ -67,6 +68,24 @@ pub struct SceneArgs {
     pub camera: Option<edgepoint_viewer::CameraSpec>,
 }
 
+/// How fast a bench session samples and makes frames.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct PaceArgs {
+    /// Pixels per new sample per frame (the paper's sparseness ratio target; server default 64).
+    #[arg(long)]
+    pub sparseness: Option<f64>,
+    /// Frame-rate cap of the server's frame loop (server default 30).
+    #[arg(long)]
+    pub max_fps: Option<f64>,
+}
+
+impl PaceArgs {
+    /// Session settings with this pace (0: the server's default).
+    pub fn settings(&self) -> pb::Settings {
+        pb::Settings { sparseness: self.sparseness.unwrap_or(0.0), max_fps: self.max_fps.unwrap_or(0.0), ..Default::default() }
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct FrameArgs {
     #[command(flatten)]
@@ -74,12 +93,8 @@ pub struct FrameArgs {
     /// Frames to run the session for; statistics cover all of them, PSNR the last.
     #[arg(long, default_value_t = 60)]
     pub frames: u32,
-    /// Pixels per new sample per frame (the paper's sparseness ratio target; server default 64).
-    #[arg(long)]
-    pub sparseness: Option<f64>,
-    /// Frame-rate cap of the server's frame loop (server default 30).
-    #[arg(long)]
-    pub max_fps: Option<f64>,
+    #[command(flatten)]
+    pub pace: PaceArgs,
     #[command(flatten)]
     pub reconstruction: edgepoint_viewer::ReconstructionArgs,
     /// Skip the reference renders (no PSNR, no speedup).
@@ -227,7 +242,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
-        let mut settings = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
+        let mut settings = args.pace.settings();
         args.reconstruction.apply(&mut settings);
         let start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
         let t0 = Instant::now();
