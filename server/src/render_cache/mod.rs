@@ -488,9 +488,10 @@ impl RenderCache {
 
     /// Stores a sample in the fixed pool, in the region of its pixel's row band, replacing (in
     /// this order) an invalid slot, a point that was hidden in the last frame, or the oldest
-    /// point. (A sample aimed at a cached point goes in by [`Self::insert_aimed`].) Hidden points are looked for with a clock hand that examines a bounded number
-    /// of slots per insert, so when hidden points are rare an insert may take the oldest
-    /// point although a hidden one exists elsewhere in the region. A pixel row beyond the
+    /// point (a sample aimed at a cached point goes in by [`Self::insert_aimed`]). Hidden
+    /// points are looked for with a clock hand that examines a bounded number of slots per
+    /// insert, so when hidden points are rare an insert may take the oldest point although a
+    /// hidden one exists elsewhere in the region. A pixel row beyond the
     /// image counts as the last row. Returns `false` (and stores
     /// nothing) for a sample with non-finite position or colour, a miss whose direction is
     /// zero, or a cache of capacity 0.
