@@ -11,7 +11,7 @@ use anyhow::{bail, Context, Result};
 use edgepoint_proto as pb;
 use edgepoint_server::image_metrics::{psnr, srgb8_to_linear, ssim};
 use edgepoint_server::reference::{render_reference, LogProgress, ReferenceImage};
-use edgepoint_server::workers::WorkerPool;
+use edgepoint_server::workers::{Dispatcher, WorkerPool};
 use edgepoint_viewer::client::{camera_from_wire, scene_source_from_arg_in, Event, SessionClient};
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 use glam::Vec3;
@@ -54,7 +54,8 @@ pub struct SceneArgs {
     #[arg(long = "shader-param", value_parser = parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Samples per pixel of the converged reference (default: 64 for `frame` and
-    /// `reference`, 16 for `motion`, which renders one per frame). Also `--spp`.
+    /// `reference`, 16 for `motion`, which renders one per frame, 1024 for `converge`). Also
+    /// `--spp`.
     #[arg(long, visible_alias = "spp")]
     pub reference_spp: Option<u32>,
     /// Directory caching converged references (keyed by scene, camera, size, spp, shader).
@@ -67,6 +68,24 @@ pub struct SceneArgs {
     pub camera: Option<edgepoint_viewer::CameraSpec>,
 }
 
+/// How fast a bench session samples and makes frames.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct PaceArgs {
+    /// Pixels per new sample per frame (the paper's sparseness ratio target; server default 64).
+    #[arg(long)]
+    pub sparseness: Option<f64>,
+    /// Frame-rate cap of the server's frame loop (server default 30).
+    #[arg(long)]
+    pub max_fps: Option<f64>,
+}
+
+impl PaceArgs {
+    /// Session settings with this pace (0: the server's default).
+    pub fn settings(&self) -> pb::Settings {
+        pb::Settings { sparseness: self.sparseness.unwrap_or(0.0), max_fps: self.max_fps.unwrap_or(0.0), ..Default::default() }
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct FrameArgs {
     #[command(flatten)]
@@ -74,12 +93,8 @@ pub struct FrameArgs {
     /// Frames to run the session for; statistics cover all of them, PSNR the last.
     #[arg(long, default_value_t = 60)]
     pub frames: u32,
-    /// Pixels per new sample per frame (the paper's sparseness ratio target; server default 64).
-    #[arg(long)]
-    pub sparseness: Option<f64>,
-    /// Frame-rate cap of the server's frame loop (server default 30).
-    #[arg(long)]
-    pub max_fps: Option<f64>,
+    #[command(flatten)]
+    pub pace: PaceArgs,
     #[command(flatten)]
     pub reconstruction: edgepoint_viewer::ReconstructionArgs,
     /// Skip the reference renders (no PSNR, no speedup).
@@ -153,29 +168,45 @@ async fn references(
     source: &pb::SceneSource,
     camera: &edgepoint_scene::Camera,
 ) -> Result<References> {
-    let hash = edgepoint_proto::scene_hash(source);
-    let endpoints = cluster.worker_addrs().iter().map(|w| format!("http://{w}")).collect();
-    let pool = WorkerPool::new(endpoints)?;
-    let dispatcher = pool.open(source.clone(), hash.clone());
+    let dispatcher = open_dispatcher(cluster, source)?;
     let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
-    let cache = RefCache::at(a.ref_cache.as_deref());
-    let key = RefCache::key(&hash, camera, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), &a.shader, &params);
-    let (converged, converged_cached) = match cache.load(&key, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)) {
-        Some(img) => (img, true),
-        None => {
-            let progress = LogProgress::new(&format!("reference {}spp", a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP)));
-            let img = render_reference(&dispatcher, camera, a.width, a.height, a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP), &a.shader, &params, &progress)
-                .await
-                .context("converged reference render")?;
-            cache.store(&key, &img)?;
-            (img, false)
-        }
-    };
+    let spp = a.reference_spp.unwrap_or(DEFAULT_REFERENCE_SPP);
+    let (converged, converged_cached) = converged_reference(&dispatcher, a, source, camera, spp).await?;
     let progress = LogProgress::new("full ray trace 1spp");
     let one_spp = render_reference(&dispatcher, camera, a.width, a.height, 1, &a.shader, &params, &progress)
         .await
         .context("1-spp full ray trace")?;
     Ok(References { converged, converged_cached, one_spp })
+}
+
+/// A dispatcher of its own to the cluster's workers, for renders outside a session.
+pub(crate) fn open_dispatcher(cluster: &LocalCluster, source: &pb::SceneSource) -> Result<Dispatcher> {
+    let endpoints = cluster.worker_addrs().iter().map(|w| format!("http://{w}")).collect();
+    let pool = WorkerPool::new(endpoints)?;
+    Ok(pool.open(source.clone(), edgepoint_proto::scene_hash(source)))
+}
+
+/// The converged reference at `spp` samples per pixel through `dispatcher`: from the on-disk
+/// cache when an earlier run stored it (then `true`), else rendered and stored.
+pub(crate) async fn converged_reference(
+    dispatcher: &Dispatcher,
+    a: &SceneArgs,
+    source: &pb::SceneSource,
+    camera: &edgepoint_scene::Camera,
+    spp: u32,
+) -> Result<(ReferenceImage, bool)> {
+    let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
+    let cache = RefCache::at(a.ref_cache.as_deref());
+    let key = RefCache::key(&edgepoint_proto::scene_hash(source), camera, a.width, a.height, spp, &a.shader, &params);
+    if let Some(img) = cache.load(&key, a.width, a.height, spp) {
+        return Ok((img, true));
+    }
+    let progress = LogProgress::new(&format!("reference {spp}spp"));
+    let img = render_reference(dispatcher, camera, a.width, a.height, spp, &a.shader, &params, &progress)
+        .await
+        .context("converged reference render")?;
+    cache.store(&key, &img)?;
+    Ok((img, false))
 }
 
 use crate::inprocess::write_image;
@@ -211,7 +242,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
-        let mut settings = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
+        let mut settings = args.pace.settings();
         args.reconstruction.apply(&mut settings);
         let start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
         let t0 = Instant::now();

@@ -26,12 +26,15 @@
 //!   corpus the tests replay).
 //! - `quality`: PSNR / SSIM of edge-and-point reconstruction vs the Render Cache's
 //!   interpolation from the same samples, at several sample densities.
+//! - `converge`: converging at rest — PSNR against the converged reference over wall time,
+//!   an edge-and-point session beside a progressive full-frame renderer on the same workers.
 //! - `motion`: quality in motion — every frame of a scripted path (orbit, dolly, object
 //!   slide, camera path file) against the converged reference of its exact state: PSNR,
 //!   SSIM, outlier pixels, the moved object's coverage, frames to fill newly exposed
 //!   regions; edge-and-point and Render Cache side by side.
 
 mod clock;
+mod converge;
 mod edges;
 mod encode;
 mod epi;
@@ -89,6 +92,10 @@ enum Cmd {
     /// every frame against the converged reference of its exact state.
     #[command(after_help = edgepoint_proto::shaders::help_text())]
     Motion(motion::MotionArgs),
+    /// Converging at rest: PSNR against the converged reference over wall time, edge-and-point
+    /// beside a progressive full-frame renderer (one sample per pixel per pass) on the same workers.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
+    Converge(converge::ConvergeArgs),
     /// Scattering models' ns per eval/sample/pdf call, and the direct shader's samples/s
     /// against the shader before materials, in this process.
     Materials(materials::MaterialsArgs),
@@ -115,6 +122,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Materials(a) => materials::run(a),
         Cmd::Edges(a) => edges::run(a),
         Cmd::Motion(a) => motion::run(a),
+        Cmd::Converge(a) => converge::run(a),
         Cmd::Fuzz(a) => fuzz::run(a),
     }
 }

@@ -13,6 +13,7 @@
 use crate::rng::mix64;
 use crate::workers::{DispatchError, Dispatcher};
 use edgepoint_proto as pb;
+use edgepoint_scene::camera::CameraFrame;
 use edgepoint_scene::{Camera, Progress};
 use glam::Vec3;
 use std::collections::HashMap;
@@ -87,6 +88,54 @@ pub fn subpixel_position(x: u32, y: u32, s: u32, spp: u32, seed: u64) -> (f32, f
     (x as f32 + (cx as f32 + jx) / nx as f32, y as f32 + (cy as f32 + jy) / ny as f32)
 }
 
+/// What every batch of a full-frame render shares.
+pub struct FullFrameSpec<'a> {
+    pub epoch: u64,
+    pub shader: &'a str,
+    pub params: &'a HashMap<String, f64>,
+    /// Requests per batch (at least 1).
+    pub batch_size: usize,
+    /// The batches' shading seeds derive from it.
+    pub seed: u64,
+}
+
+/// The request batches of `spp` rays through every pixel of `cam`'s image, in scan order,
+/// ray `s` of pixel (x, y) through the continuous image position `position(x, y, s)`;
+/// request id = pixel index × spp + s. Made lazily as a dispatcher's window opens, so
+/// memory stays bounded at any size.
+pub fn pixel_batches<'a>(
+    cam: &CameraFrame,
+    spp: u32,
+    spec: &'a FullFrameSpec<'a>,
+    position: impl Fn(u32, u32, u32) -> (f32, f32) + 'a,
+) -> impl Iterator<Item = pb::RequestBatch> + 'a {
+    let cam = *cam;
+    let (width, spp) = (cam.width as u64, spp.max(1) as u64);
+    let total = width * cam.height as u64 * spp;
+    let batch_size = spec.batch_size.max(1) as u64;
+    (0..total.div_ceil(batch_size)).map(move |b| {
+        let lo = b * batch_size;
+        let hi = (lo + batch_size).min(total);
+        let requests = (lo..hi)
+            .map(|r| {
+                let p = r / spp;
+                let (x, y) = ((p % width) as u32, (p / width) as u32);
+                let (sx, sy) = position(x, y, (r % spp) as u32);
+                let (o, d) = cam.ray(sx, sy);
+                pb::ShadeRequest { id: r, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(d.into()) }
+            })
+            .collect();
+        pb::RequestBatch {
+            batch_id: b,
+            epoch: spec.epoch,
+            shader: spec.shader.to_string(),
+            params: spec.params.clone(),
+            requests,
+            seed: mix64(spec.seed ^ b.wrapping_mul(0x9e37_79b9)),
+        }
+    })
+}
+
 /// Renders `width` x `height` with `spp` rays per pixel at the dispatcher's current epoch.
 /// See the module docs.
 #[allow(clippy::too_many_arguments)]
@@ -122,31 +171,9 @@ pub async fn render_reference_with(
     camera.validate().map_err(ReferenceError::BadCamera)?;
     let cam = camera.frame(width, height);
     let total = pixels * spp as u64;
-    let epoch = dispatcher.epoch();
-    let batch_size = opts.batch_size.max(1) as u64;
     let seed = opts.seed;
-    // Batches are made lazily as the window opens, so memory stays bounded at any size.
-    let batches = (0..total.div_ceil(batch_size)).map(move |b| {
-        let lo = b * batch_size;
-        let hi = (lo + batch_size).min(total);
-        let requests = (lo..hi)
-            .map(|r| {
-                let p = r / spp as u64;
-                let (x, y) = ((p % width as u64) as u32, (p / width as u64) as u32);
-                let (sx, sy) = subpixel_position(x, y, (r % spp as u64) as u32, spp, seed);
-                let (o, d) = cam.ray(sx, sy);
-                pb::ShadeRequest { id: r, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(d.into()) }
-            })
-            .collect();
-        pb::RequestBatch {
-            batch_id: b,
-            epoch,
-            shader: shader.to_string(),
-            params: params.clone(),
-            requests,
-            seed: mix64(seed ^ b.wrapping_mul(0x9e37_79b9)),
-        }
-    });
+    let spec = FullFrameSpec { epoch: dispatcher.epoch(), shader, params, batch_size: opts.batch_size, seed };
+    let batches = pixel_batches(&cam, spp, &spec, move |x, y, s| subpixel_position(x, y, s, spp, seed));
 
     let mut sum = vec![Vec3::ZERO; pixels as usize];
     let mut count = vec![0u32; pixels as usize];

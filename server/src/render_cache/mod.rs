@@ -17,6 +17,7 @@
 //!
 //! No networking here; all per-frame buffers are allocated once in [`RenderCache::new`].
 
+mod converge;
 pub mod fresh;
 pub mod holes;
 mod interpolate;
@@ -229,6 +230,8 @@ pub struct CachedPoint {
     pub pixel: [u32; 2],
     /// Frames since the point was shaded ([`STALE_AGE`] after [`RenderCache::mark_stale`]).
     pub age: f32,
+    /// Samples averaged into its colour (`converge.rs`).
+    pub samples: u32,
 }
 
 /// [`PointImage::point`] of a pixel without a point.
@@ -293,6 +296,8 @@ struct Pool {
     flags: Vec<u8>,
     /// Insertion stamp; matches the oldest-first queue entry while the point lives.
     stamp: Vec<u64>,
+    /// Samples of the same surface point averaged into `shade.color` (`converge.rs`).
+    samples: Vec<u16>,
 }
 
 /// Replacement bookkeeping of one pool region (slots `start..end`).
@@ -325,6 +330,8 @@ pub struct RenderCache {
     /// Pool regions, one per band of `BAND_ROWS` image rows.
     regions: Vec<Region>,
     next_stamp: u64,
+    /// Samples averaged into existing points (`converge.rs`).
+    averaged: u64,
     /// Frames reprojected so far (ages are differences of it).
     frame: u32,
     // Per-frame buffers.
@@ -395,7 +402,7 @@ impl RenderCache {
         use std::mem::size_of;
         let pixels = width as usize * height as usize;
         let capacity = capacity_for(pixels, points_per_pixel);
-        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8;
+        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8 + 2;
         // Projections, the free lists and the oldest-first queues (reserved at 2 entries per
         // slot plus 64 per region).
         let per_point = pool + size_of::<Projected>() + 4 + 2 * size_of::<(u64, u32)>();
@@ -427,6 +434,7 @@ impl RenderCache {
             pixel: vec![[0; 2]; capacity],
             flags: vec![0; capacity],
             stamp: vec![0; capacity],
+            samples: vec![0; capacity],
         };
         // Region of band b: slots in proportion to the pixels before the band.
         let bands = (cfg.height.div_ceil(BAND_ROWS)).max(1);
@@ -451,6 +459,7 @@ impl RenderCache {
             valid: 0,
             regions,
             next_stamp: 0,
+            averaged: 0,
             frame: 0,
             zbufs: vec![vec![EMPTY_KEY; pixels]],
             zmin_row: vec![u32::MAX; pixels],
@@ -479,9 +488,10 @@ impl RenderCache {
 
     /// Stores a sample in the fixed pool, in the region of its pixel's row band, replacing (in
     /// this order) an invalid slot, a point that was hidden in the last frame, or the oldest
-    /// point. Hidden points are looked for with a clock hand that examines a bounded number
-    /// of slots per insert, so when hidden points are rare an insert may take the oldest
-    /// point although a hidden one exists elsewhere in the region. A pixel row beyond the
+    /// point (a sample aimed at a cached point goes in by [`Self::insert_aimed`]). Hidden
+    /// points are looked for with a clock hand that examines a bounded number of slots per
+    /// insert, so when hidden points are rare an insert may take the oldest point although a
+    /// hidden one exists elsewhere in the region. A pixel row beyond the
     /// image counts as the last row. Returns `false` (and stores
     /// nothing) for a sample with non-finite position or colour, a miss whose direction is
     /// zero, or a cache of capacity 0.
@@ -498,6 +508,11 @@ impl RenderCache {
         }
         let band = (s.pixel[1] / BAND_ROWS).min(self.regions.len() as u32 - 1) as usize;
         let Some(slot) = self.take_slot(band) else { return false };
+        self.write(slot, band, s, stale)
+    }
+
+    /// Writes sample `s` into `slot` of region `band` as a new point of one sample.
+    fn write(&mut self, slot: u32, band: usize, s: &Sample, stale: bool) -> bool {
         let i = slot as usize;
         let born = self.frame;
         self.note_replaced(i);
@@ -514,10 +529,18 @@ impl RenderCache {
         p.epoch[i] = s.epoch;
         p.pixel[i] = s.pixel;
         p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 } | if stale { FLAG_STALE } else { 0 };
+        p.samples[i] = 1;
         p.stamp[i] = self.next_stamp;
         // Not part of the last frame: never taken for a hidden point.
         self.proj[i] = Projected::NONE;
         self.project_inserted(i);
+        self.enqueue(band, slot);
+        true
+    }
+
+    /// Puts `slot`, just stamped `next_stamp`, at the young end of region `band`'s
+    /// oldest-first queue.
+    fn enqueue(&mut self, band: usize, slot: u32) {
         let r = &mut self.regions[band];
         r.oldest.push_back((self.next_stamp, slot));
         self.next_stamp += 1;
@@ -526,7 +549,6 @@ impl RenderCache {
             let (flags, stamp) = (&self.pool.flags, &self.pool.stamp);
             r.oldest.retain(|&(st, j)| flags[j as usize] & FLAG_VALID != 0 && stamp[j as usize] == st);
         }
-        true
     }
 
     /// A slot of region `band`: invalid, else hidden in the last frame (among the next
@@ -733,6 +755,7 @@ impl RenderCache {
             epoch: p.epoch[i],
             pixel: p.pixel[i],
             age: if p.flags[i] & FLAG_STALE != 0 { STALE_AGE } else { Self::age_of(self.frame, p.shade[i].born) },
+            samples: u32::from(p.samples[i]),
         })
     }
 

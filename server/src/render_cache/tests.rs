@@ -949,9 +949,16 @@ fn still_view_lockstep(with_geometry: bool) {
                 s.normal = if rng.chance(0.2) { d } else { -d };
                 s
             };
-            let s = at(s, x as u32, y as u32);
+            let mut s = at(s, x as u32, y as u32);
+            // Some samples re-shade the point their pixel shows (converge.rs): averaged into
+            // it, or replacing it when it is stale.
+            let mut aimed = NO_POINT;
+            let shown = inc.point_image().point[(y as u32 * w + x as u32) as usize];
+            if let Some(p) = inc.point(shown).filter(|_| rng.chance(0.3)) {
+                (s.hit, s.position, s.object, s.epoch, aimed) = (p.hit, p.position, p.object, p.epoch, shown);
+            }
             let stale = rng.chance(0.05);
-            assert_eq!(inc.insert_aged(&s, stale), full.insert_aged(&s, stale));
+            assert_eq!(inc.insert_aimed(&s, stale, aimed), full.insert_aimed(&s, stale, aimed));
         }
         full.reproject_all = true;
         still_frames += usize::from(!inc.reproject_all && inc.last_view.is_some());
@@ -986,6 +993,7 @@ fn still_view_lockstep(with_geometry: bool) {
     }
     assert!(still_frames >= 25, "most frames took the still-view path ({still_frames})");
     assert!(in_place_frames >= 20, "most still frames updated the point image in place ({in_place_frames})");
+    assert!(inc.averaged() > 300, "samples were averaged into points ({})", inc.averaged());
 }
 
 #[test]

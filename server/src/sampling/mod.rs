@@ -46,6 +46,9 @@ pub struct PixelRequest {
     /// Continuous image position in [x, x+1) x [y, y+1) (DESIGN.md conventions).
     pub sx: f32,
     pub sy: f32,
+    /// The cached point the pick shades again ([`aim_at_points`]), or
+    /// [`crate::render_cache::NO_POINT`] for a jittered pick.
+    pub point: u32,
 }
 
 /// Priority of a pixel without a point and no reachable point at all.
@@ -139,6 +142,7 @@ pub const DITHER_BAND_ROWS: usize = 64;
 /// A few rows bring the error field to its steady state (its memory is short).
 pub const DITHER_WARM_UP_ROWS: usize = 8;
 
+use crate::render_cache::NO_POINT;
 use crate::rng::mix64;
 
 /// Uniform in [0, 1) from the top 24 bits.
@@ -157,6 +161,25 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
         v
     } else {
         f32::from_bits(top.to_bits() - 1)
+    }
+}
+
+/// Converging at rest (issue 14 item 3, `render_cache/converge.rs`): a pick of a pixel that
+/// shows a fresh point, whose sample the reconstruction can use (`usable(x, y)`), is aimed
+/// at that point's position inside the pixel instead of a jittered one. The worker then
+/// shades the same surface point again, and the cache averages the new sample into it. A
+/// pixel without a point, with a stale one (something changed it: it is replaced, not
+/// averaged), or whose sample is edge-ambiguous or in a complex pixel keeps its jittered
+/// position, so new points still land elsewhere in it.
+pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::PointImage, usable: impl Fn(u32, u32) -> bool) {
+    let w = points.width as usize;
+    for p in picks.iter_mut() {
+        let i = p.y as usize * w + p.x as usize;
+        let Some(&point) = points.point.get(i) else { continue };
+        if point != NO_POINT && points.age[i] < crate::render_cache::STALE_AGE && usable(p.x, p.y) {
+            let [u, v] = points.subpixel[i];
+            (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+        }
     }
 }
 
@@ -226,7 +249,7 @@ impl Sampler {
             for y in 0..h as u32 {
                 for x in 0..w as u32 {
                     let hsh = mix64(mix64(key ^ (y as u64 * w as u64 + x as u64)));
-                    out.push(PixelRequest { x, y, sx: inside_pixel(x, unit(hsh)), sy: inside_pixel(y, unit(hsh << 24)) });
+                    out.push(PixelRequest { x, y, sx: inside_pixel(x, unit(hsh)), sy: inside_pixel(y, unit(hsh << 24)), point: NO_POINT });
                 }
             }
             return;
@@ -416,6 +439,7 @@ impl RowScan<'_> {
                     y: self.y as u32,
                     sx: inside_pixel(x as u32, unit(h2)),
                     sy: inside_pixel(self.y as u32, unit(h2 << 24)),
+                    point: NO_POINT,
                 });
                 if self.out.len() == self.budget {
                     *self.rng = rng;

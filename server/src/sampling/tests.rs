@@ -249,7 +249,7 @@ fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages
                 let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
                 let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
                     let h2 = mix64(hsh);
-                    band_out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)) });
+                    band_out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)), point: crate::render_cache::NO_POINT });
                     if ly >= first && band_out.len() == budget {
                         break 'rows;
                     }

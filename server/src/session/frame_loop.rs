@@ -22,12 +22,12 @@ use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
-use crate::epi::{Epi, EpiCounts, InterpOptions, Overlay, STAGE_EDGES};
+use crate::epi::{Epi, EpiCounts, Flags, InterpOptions, Overlay, STAGE_EDGES};
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
 use crate::render_cache::{CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
 use crate::render_cache::fresh::STAGE_STALE;
-use crate::sampling::{PixelRequest, Sampler, SamplingConfig};
+use crate::sampling::{aim_at_points, PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
 use crate::visibility::{Visibility, STAGE_VISIBILITY};
 use crate::workers::Dispatcher;
@@ -67,6 +67,8 @@ const POLL: Duration = Duration::from_millis(50);
 pub struct SessionCounters {
     pub frames: u64,
     pub samples_inserted: u64,
+    /// Of those, samples averaged into the point they re-shaded (converging at rest).
+    pub averaged: u64,
     pub samples_requested: u64,
     /// Samples of an object that moved after the sample's epoch: carried to the object's
     /// current place (from the hit's object-space position) and inserted as stale.
@@ -250,6 +252,11 @@ impl FrameLoop {
         if budget > 0 {
             let ages = &self.cache.point_image().age;
             self.sampler.select(self.cache.filter_weights(), ages, &cfg, budget, &mut self.picks);
+            // Re-picked points are shaded again where they are, so the cache averages their
+            // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
+            let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;
+            let flags = self.epi.flags();
+            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || flags.get(x as usize, y as usize, Flags::USABLE));
         }
         self.times.add("sampling", ms_since(t));
 
@@ -587,12 +594,13 @@ impl FrameLoop {
                     self.counters.nonfinite += 1;
                     continue;
                 }
-                if self.cache.insert_aged(&sample, stale) {
+                if self.cache.insert_aimed(&sample, stale, info.point) {
                     inserted += 1;
                 }
             }
         }
         self.counters.samples_inserted += inserted as u64;
+        self.counters.averaged = self.cache.averaged();
         inserted
     }
 

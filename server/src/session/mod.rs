@@ -117,7 +117,7 @@ impl Session {
             tracing::info!(session = %id, width = w, height = h, "frame loop started");
             fl.run();
             let c = fl.counters;
-            tracing::info!(session = %id, frames = c.frames, samples_inserted = c.samples_inserted,
+            tracing::info!(session = %id, frames = c.frames, samples_inserted = c.samples_inserted, averaged = c.averaged,
                 samples_requested = c.samples_requested, carried = c.carried, stale_dropped = c.stale_dropped,
                 unmatched = c.unmatched, nonfinite = c.nonfinite, refused_batches = c.refused_batches,
                 triples = fl.feedback.triples.len(), "session ended");

@@ -18,15 +18,19 @@ struct Slot {
     id: u64,
     pixel: [u32; 2],
     dir: Vec3,
+    point: u32,
 }
 
-const EMPTY: Slot = Slot { id: u64::MAX, pixel: [0, 0], dir: Vec3::ZERO };
+const EMPTY: Slot = Slot { id: u64::MAX, pixel: [0, 0], dir: Vec3::ZERO, point: u32::MAX };
 
 /// What the session remembers of one request.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RequestInfo {
     pub pixel: [u32; 2],
     pub dir: Vec3,
+    /// The cached point the request shades again (`u32::MAX`: none; see
+    /// `sampling::aim_at_points`).
+    pub point: u32,
 }
 
 /// Request ids to (pixel, direction), for the most recent `capacity` requests.
@@ -65,12 +69,12 @@ impl RequestRing {
         *self = bigger;
     }
 
-    /// Records a request; returns its id.
+    /// Records a request (aimed at cached point `point`, `u32::MAX` for none); returns its id.
     #[inline]
-    pub fn push(&mut self, pixel: [u32; 2], dir: Vec3) -> u64 {
+    pub fn push(&mut self, pixel: [u32; 2], dir: Vec3, point: u32) -> u64 {
         let id = self.next_id;
         self.next_id += 1;
-        self.slots[(id & self.mask) as usize] = Slot { id, pixel, dir };
+        self.slots[(id & self.mask) as usize] = Slot { id, pixel, dir, point };
         id
     }
 
@@ -78,7 +82,7 @@ impl RequestRing {
     #[inline]
     pub fn get(&self, id: u64) -> Option<RequestInfo> {
         let s = self.slots[(id & self.mask) as usize];
-        (s.id == id).then_some(RequestInfo { pixel: s.pixel, dir: s.dir })
+        (s.id == id).then_some(RequestInfo { pixel: s.pixel, dir: s.dir, point: s.point })
     }
 }
 
@@ -115,7 +119,7 @@ pub fn build_batches(
             .step_by(batches)
             .map(|p| {
                 let (origin, dir) = cam.ray(p.sx, p.sy);
-                let id = ring.push([p.x, p.y], dir);
+                let id = ring.push([p.x, p.y], dir, p.point);
                 pb::ShadeRequest {
                     id,
                     pixel_x: p.x,
@@ -147,7 +151,7 @@ mod tests {
     fn ring_remembers_recent_requests_and_forgets_reused_slots() {
         let mut r = RequestRing::new(100);
         assert_eq!(r.capacity(), 128);
-        let ids: Vec<u64> = (0..200).map(|i| r.push([i, i + 1], Vec3::new(i as f32, 0.0, 1.0))).collect();
+        let ids: Vec<u64> = (0..200).map(|i| r.push([i, i + 1], Vec3::new(i as f32, 0.0, 1.0), i)).collect();
         assert_eq!(ids, (0..200).collect::<Vec<_>>());
         for &id in &ids[..72] {
             assert!(r.get(id).is_none(), "slot of {id} was reused");
@@ -156,6 +160,7 @@ mod tests {
             let info = r.get(id).unwrap();
             assert_eq!(info.pixel, [id as u32, id as u32 + 1]);
             assert_eq!(info.dir.x, id as f32);
+            assert_eq!(info.point, id as u32);
         }
         assert!(r.get(500).is_none(), "future id");
         r.reserve(1000);
@@ -163,14 +168,14 @@ mod tests {
         for &id in &ids[72..] {
             assert_eq!(r.get(id).unwrap().pixel[0], id as u32, "kept across growth");
         }
-        assert_eq!(r.push([0, 0], Vec3::Z), 200);
+        assert_eq!(r.push([0, 0], Vec3::Z, u32::MAX), 200);
     }
 
     #[test]
     fn batches_carry_rays_through_the_picked_positions() {
         let cam = Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 };
         let f = cam.frame(32, 16);
-        let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: i % 16, sx: i as f32 + 0.25, sy: (i % 16) as f32 + 0.75 }).collect();
+        let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: i % 16, sx: i as f32 + 0.25, sy: (i % 16) as f32 + 0.75, point: i }).collect();
         let mut ring = RequestRing::new(64);
         let params = std::collections::HashMap::from([("ambient".to_string(), 0.1)]);
         let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4 };
@@ -188,6 +193,7 @@ mod tests {
             for r in &b.requests {
                 let info = ring.get(r.id).unwrap();
                 assert_eq!(info.pixel, [r.pixel_x, r.pixel_y]);
+                assert_eq!(info.point, r.pixel_x, "the point the pick was aimed at");
                 let d: Vec3 = r.direction.unwrap().into();
                 let o: Vec3 = r.origin.unwrap().into();
                 // The ray projects back onto the jittered position it was built for.

@@ -1,0 +1,111 @@
+//! Converging at rest (issue 14 item 3; DESIGN.md "Shaders": "repeated samples of a cached
+//! point are averaged at the renderer while nothing changes"). With a still camera and still
+//! objects the sampler keeps re-picking pixels (their points age), and it aims such a pick at
+//! the very point the pixel shows (`sampling::aim_at_points`). The worker's answer is then a
+//! new, independent estimate of the same surface point's radiance, and it is averaged into
+//! that point with the count of samples it holds, so the point's noise falls as 1/√n
+//! instead of staying at one sample's noise, as a progressive renderer's pixels do.
+//!
+//! "Its" point is the one the request was aimed at (the session remembers it with the
+//! request), when the last frame still showed it at the sample's pixel and it lies on the
+//! same object (or is the same background direction) within [`SAME_POINT_RELATIVE`] of the
+//! sample's position: exact, and O(1). The sample is averaged in only while
+//! nothing can have changed the point's shading since it was shaded: the point is not stale
+//! (its object moved, a moved object may shadow it) and the sample was shaded at the point's
+//! epoch (no object moved in between). Otherwise the sample replaces the point as a new
+//! point of one sample: the count resets. Invalidated points (`invalidate_objects`, `clear`)
+//! leave the pool, and a slot reused for another sample starts from one.
+use super::{RenderCache, Sample, FLAG_HIT, FLAG_STALE, FLAG_VALID, NO_POINT};
+use glam::Vec3;
+
+/// A sample is of the point a pixel shows when their positions differ by at most this
+/// fraction of the point's view depth (for a background miss: of the unit direction). A
+/// re-aimed ray passes through the point to within the 1/65536 pixel of its projection and
+/// f32 rounding (about 1e-6 of the depth, some 1e-5 on a surface seen at a grazing angle):
+/// far below this. A pixel at 512² and 40° spans 1.4e-3 of the depth (at 2048², 3.5e-4), so
+/// a jittered sample elsewhere in the pixel is a different point.
+pub const SAME_POINT_RELATIVE: f32 = 1e-4;
+
+impl RenderCache {
+    /// [`Self::insert_aged`] for a sample whose request was aimed at cached point `point`
+    /// (`sampling::aim_at_points`; [`NO_POINT`]: none): when it is a sample of that point,
+    /// it is averaged into it while nothing changed since the point was shaded, else it
+    /// replaces it (see the module doc). Any other sample is inserted as a new point.
+    pub fn insert_aimed(&mut self, s: &Sample, stale: bool, point: u32) -> bool {
+        if !(s.position.is_finite() && s.color.is_finite()) {
+            return false;
+        }
+        match self.own_point(s, point).filter(|_| !stale) {
+            Some((i, pixel)) if self.may_average(i, s) => self.average_into(i, pixel, s),
+            Some((i, _)) => return self.write(i as u32, self.region_of(i as u32), s, false),
+            None => return self.insert_aged(s, stale),
+        }
+        true
+    }
+
+    /// Slot `point` and the index of `s`'s pixel, when the last frame showed that point at
+    /// the pixel and `s` is a sample of the same surface point (module doc).
+    fn own_point(&self, s: &Sample, point: u32) -> Option<(usize, usize)> {
+        let [x, y] = s.pixel;
+        if point == NO_POINT || x >= self.cfg.width || y >= self.cfg.height {
+            return None;
+        }
+        let pixel = y as usize * self.cfg.width as usize + x as usize;
+        if self.points.point[pixel] != point {
+            return None;
+        }
+        let i = point as usize;
+        let p = &self.pool;
+        let flags = p.flags[i];
+        if flags & FLAG_VALID == 0 || (flags & FLAG_HIT != 0) != s.hit || p.object[i] != s.object {
+            return None;
+        }
+        let (position, scale) = if s.hit { (s.position, self.points.depth[pixel]) } else { (s.position.normalize(), 1.0) };
+        let tolerance = SAME_POINT_RELATIVE * scale;
+        let d = position - Vec3::new(p.px[i], p.py[i], p.pz[i]);
+        (d.length_squared() <= tolerance * tolerance).then_some((i, pixel))
+    }
+
+    /// Whether sample `s` of point `i` may be averaged into it: nothing changed its shading
+    /// in between (module doc).
+    fn may_average(&self, i: usize, s: &Sample) -> bool {
+        self.pool.flags[i] & FLAG_STALE == 0 && self.pool.epoch[i] == s.epoch
+    }
+
+    /// Averages sample `s` into point `i`, which the last frame showed at `pixel`: its colour
+    /// becomes the mean of its samples (after `u16::MAX` samples, a running mean over about
+    /// that many), it counts as freshly shaded, and it goes to the young end of replacement.
+    /// Its place is unchanged, so the point image is updated in place.
+    fn average_into(&mut self, i: usize, pixel: usize, s: &Sample) {
+        self.averaged += 1;
+        let p = &mut self.pool;
+        let n = p.samples[i].saturating_add(1);
+        p.samples[i] = n;
+        let shade = &mut p.shade[i];
+        shade.color += (s.color - shade.color) / f32::from(n);
+        shade.born = self.frame;
+        let (color, born) = (shade.color, shade.born);
+        // The point image the next frame updates in place reads these from the pixel, not
+        // from the pool (the pixel's depth-buffer entry does not change).
+        self.points.color[pixel] = color;
+        self.points.born[pixel] = born;
+        self.points.age[pixel] = Self::age_of(self.frame, born);
+        // To the young end of replacement, unless it was written since the last frame (then
+        // it is young already, and a still view's pending projection of the slot, which a
+        // new stamp would void, is what places it). A point of the last frame keeps its
+        // projection: nothing to redo.
+        if self.proj[i].pixel != NO_POINT {
+            self.pool.stamp[i] = self.next_stamp;
+            let band = self.region_of(i as u32);
+            self.enqueue(band, i as u32);
+        }
+    }
+
+    /// Samples averaged into existing points since the cache was made.
+    pub fn averaged(&self) -> u64 {
+        self.averaged
+    }
+}
+
+#[cfg(test)]
+mod tests;

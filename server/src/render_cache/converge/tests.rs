@@ -1,0 +1,275 @@
+//! Converging at rest: samples re-aimed at a cached point are averaged into it exactly, a
+//! pixel's variance falls as 1/n over still frames, and anything that changes a point's
+//! shading resets its count.
+use super::super::*;
+use crate::rng::Rng;
+use crate::sampling::{aim_at_points, PixelRequest, Sampler, SamplingConfig};
+use crate::stage_times::StageTimes;
+use edgepoint_scene::camera::{Camera, CameraFrame};
+
+fn camera(w: u32, h: u32) -> CameraFrame {
+    Camera { eye: Vec3::new(0.5, 0.8, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 }.frame(w, h)
+}
+
+/// The little scene of the cache tests, traced: a sphere (object 0) before a slanted plane
+/// (object 1), sky elsewhere. Returns (hit, position or direction, object).
+fn trace(cam: &CameraFrame, sx: f32, sy: f32) -> (bool, Vec3, u32) {
+    let (o, d) = cam.ray(sx, sy);
+    let (centre, radius) = (Vec3::new(0.3, 0.2, 0.0), 0.8);
+    let (plane_n, plane_d) = (Vec3::new(0.2, 0.3, 1.0).normalize(), -1.5);
+    let mut best = (f32::INFINITY, u32::MAX);
+    let oc = o - centre;
+    let b = oc.dot(d);
+    let disc = b * b - (oc.length_squared() - radius * radius);
+    if disc >= 0.0 && -b - disc.sqrt() > 0.0 {
+        best = (-b - disc.sqrt(), 0);
+    }
+    let t = (plane_d - plane_n.dot(o)) / plane_n.dot(d);
+    if t > 0.0 && t < best.0 && (o + d * t).x.abs() < 1.5 {
+        best = (t, 1);
+    }
+    if best.1 == u32::MAX {
+        (false, d, u32::MAX)
+    } else {
+        (true, o + d * best.0, best.1)
+    }
+}
+
+/// A sample of the ray through (sx, sy) of pixel `pixel` with colour `color`.
+fn shade(cam: &CameraFrame, pixel: [u32; 2], (sx, sy): (f32, f32), color: Vec3, epoch: u64) -> Sample {
+    let (hit, position, object) = trace(cam, sx, sy);
+    let normal = if hit { (cam.eye - position).normalize() } else { Vec3::ZERO };
+    Sample { hit, position, normal, color, object, epoch, pixel }
+}
+
+/// One jittered sample per pixel, then a frame.
+fn first_samples(c: &mut RenderCache, cam: &CameraFrame, rng: &mut Rng, color: impl Fn(&mut Rng) -> Vec3) {
+    for y in 0..cam.height {
+        for x in 0..cam.width {
+            let s = shade(cam, [x, y], (x as f32 + rng.unit(), y as f32 + rng.unit()), color(rng), 1);
+            assert!(c.insert(&s));
+        }
+    }
+    c.reproject_points(cam, None, &mut StageTimes::new());
+}
+
+/// A pick of every pixel that shows a point, aimed at it.
+fn aimed_picks(c: &RenderCache, rng: &mut Rng) -> Vec<PixelRequest> {
+    let (w, h) = (c.width(), c.height());
+    let pi = c.point_image();
+    let mut picks: Vec<PixelRequest> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| pi.point[(y * w + x) as usize] != NO_POINT)
+        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.5, sy: y as f32 + 0.5, point: NO_POINT })
+        .collect();
+    for p in &mut picks {
+        (p.sx, p.sy) = (p.x as f32 + rng.unit(), p.y as f32 + rng.unit());
+    }
+    aim_at_points(&mut picks, c.point_image(), |_, _| true);
+    picks
+}
+
+#[test]
+fn a_point_re_shaded_n_times_holds_the_mean_of_its_samples() {
+    let (w, h) = (40u32, 30u32);
+    let cam = camera(w, h);
+    let mut rng = Rng::new(3);
+    let mut c = RenderCache::new(CacheConfig::new(w, h));
+    // Per pixel: the oracle's sum of the samples given to the point it shows (f64).
+    let mut sums = vec![glam::DVec3::ZERO; (w * h) as usize];
+    first_samples(&mut c, &cam, &mut rng, |r| r.vec3(0.0, 1.0));
+    for (i, s) in sums.iter_mut().enumerate() {
+        *s = c.point_image().color[i].as_dvec3();
+    }
+    let shown: Vec<u32> = c.point_image().point.clone();
+    let with_point = shown.iter().filter(|&&p| p != NO_POINT).count();
+    assert!(with_point > (w * h) as usize * 9 / 10, "nearly every pixel shows its point ({with_point})");
+    let rounds = 24u32;
+    for _ in 0..rounds {
+        for p in aimed_picks(&c, &mut rng) {
+            // A noisy value around a known mean (uniform noise of a wide range).
+            let color = Vec3::new(0.3, 0.5, 0.7) + rng.vec3(-0.3, 0.3);
+            let i = (p.y * w + p.x) as usize;
+            sums[i] += color.as_dvec3();
+            assert!(c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), color, 1), false, p.point));
+        }
+        c.reproject_points(&cam, None, &mut StageTimes::new());
+        assert_eq!(c.point_image().point, shown, "averaging keeps every point in its place");
+    }
+    assert_eq!(c.averaged(), u64::from(rounds) * with_point as u64, "every re-aimed sample found its point");
+    assert_eq!(c.len(), (w * h) as usize, "and took no slot of its own");
+    for (i, &slot) in shown.iter().enumerate().filter(|&(_, &slot)| slot != NO_POINT) {
+        let p = c.point(slot).unwrap();
+        assert_eq!(p.samples, rounds + 1);
+        let mean = sums[i] / f64::from(rounds + 1);
+        assert!((p.color.as_dvec3() - mean).abs().max_element() < 1e-5, "pixel {i}: {} vs mean {mean}", p.color);
+        assert_eq!(c.point_image().color[i], p.color, "the point image shows the mean");
+        assert_eq!(p.age, 1.0, "a point averaged before the last frame counts as shaded then");
+    }
+}
+
+#[test]
+fn a_pixel_s_variance_falls_as_one_over_its_samples_over_still_frames() {
+    // Frames at rest as a session makes them: prioritized sampling of 1/4 of the pixels per
+    // frame, picks aimed at the points, shaded with noise of known variance, inserted,
+    // reprojected. The points' errors against the true value, scaled by their sample counts,
+    // have variance σ² whatever the counts are (the samples are averaged with their count),
+    // and the image's mean squared error falls as the mean of 1/n.
+    let (w, h) = (64u32, 64u32);
+    let cam = camera(w, h);
+    let mut rng = Rng::new(11);
+    let truth = Vec3::splat(0.5);
+    let sigma = 0.2f64; // standard deviation of uniform noise on [-a, a]: a / √3
+    let a = (sigma * 3f64.sqrt()) as f32;
+    let noisy = move |r: &mut Rng| truth + Vec3::splat(r.range(-a, a));
+    let mut c = RenderCache::new(CacheConfig::new(w, h));
+    first_samples(&mut c, &cam, &mut rng, noisy);
+    let mut sampler = Sampler::new(w, h, 5);
+    let cfg = SamplingConfig::default();
+    let mut picks = Vec::new();
+    let n_px = (w * h) as usize;
+    let mut last_mse = f64::INFINITY;
+    for f in 1..=96u32 {
+        c.reproject_and_interpolate(&cam, &mut StageTimes::new());
+        if f % 32 == 0 {
+            let pi = c.point_image();
+            let (mut scaled, mut mse, mut inv_n) = (0.0f64, 0.0f64, 0.0f64);
+            let shown: Vec<CachedPoint> = pi.point.iter().filter_map(|&j| c.point(j)).collect();
+            assert!(shown.len() > n_px * 9 / 10, "frame {f}: most pixels show a point");
+            let n_px = shown.len();
+            for p in shown {
+                let e = f64::from(p.color.x - truth.x);
+                scaled += e * e * f64::from(p.samples);
+                mse += e * e;
+                inv_n += 1.0 / f64::from(p.samples);
+            }
+            let (scaled, mse, inv_n) = (scaled / n_px as f64 / (sigma * sigma), mse / n_px as f64, inv_n / n_px as f64);
+            // 4096 pixels: the relative standard error of a variance estimate is about
+            // √(2/4096) = 2.2 % (less for uniform noise); ±10 % is 4.5 of them.
+            assert!((scaled - 1.0).abs() < 0.1, "frame {f}: n·error²/σ² averages {scaled:.3}, not 1");
+            assert!((mse / (sigma * sigma * inv_n) - 1.0).abs() < 0.15, "frame {f}: MSE {mse:.2e} vs σ²·mean(1/n) {:.2e}", sigma * sigma * inv_n);
+            assert!(mse < last_mse * 0.85, "frame {f}: the image's error falls ({mse:.2e} after {last_mse:.2e})");
+            last_mse = mse;
+        }
+        sampler.select(c.filter_weights(), &c.point_image().age, &cfg, n_px / 4, &mut picks);
+        aim_at_points(&mut picks, c.point_image(), |_, _| true);
+        for p in &picks {
+            c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noisy(&mut rng), 1), false, p.point);
+        }
+    }
+    // 95 frames × 1/4 of the pixels: about 24 samples a point.
+    assert!(c.averaged() as f64 > 0.95 * 95.0 * (n_px / 4) as f64, "nearly every sample was averaged ({})", c.averaged());
+}
+
+#[test]
+fn changes_reset_the_count_and_other_samples_do_not_join_a_point() {
+    let (w, h) = (24u32, 18u32);
+    let cam = camera(w, h);
+    let mut rng = Rng::new(8);
+    let mut c = RenderCache::new(CacheConfig::new(w, h));
+    first_samples(&mut c, &cam, &mut rng, |_| Vec3::splat(0.25));
+    for _ in 0..3 {
+        for p in aimed_picks(&c, &mut rng) {
+            c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), Vec3::splat(0.25), 1), false, p.point);
+        }
+        c.reproject_points(&cam, None, &mut StageTimes::new());
+    }
+    let pi = c.point_image().clone();
+    let count = |c: &RenderCache, i: usize| c.point(pi.point[i]).map(|p| p.samples);
+    // A pixel on the sphere (object 0) and one on the plane (object 1).
+    let find = |o: u32| (0..pi.point.len()).find(|&i| c.point(pi.point[i]).is_some_and(|p| p.hit && p.object == o)).unwrap();
+    let (on_sphere, on_plane) = (find(0), find(1));
+    assert_eq!(count(&c, on_plane), Some(4));
+    let xy = |i: usize| [(i % w as usize) as u32, (i / w as usize) as u32];
+    let aim = |i: usize| {
+        let [x, y] = xy(i);
+        (x as f32 + pi.subpixel[i][0], y as f32 + pi.subpixel[i][1])
+    };
+
+    // A sample elsewhere in the pixel is another point: it is not averaged in.
+    let [x, y] = xy(on_plane);
+    let [u, v] = pi.subpixel[on_plane];
+    let away = (x as f32 + if u < 0.5 { u + 0.4 } else { u - 0.4 }, y as f32 + v);
+    let plane_point = pi.point[on_plane];
+    let before = c.averaged();
+    c.insert_aimed(&shade(&cam, [x, y], away, Vec3::ONE, 1), false, plane_point);
+    assert_eq!(c.averaged(), before, "a sample a part of a pixel away");
+    assert_eq!(count(&c, on_plane), Some(4));
+    // Another object's sample at the same place is not (it cannot be the same point).
+    let mut other = shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1);
+    other.object = 7;
+    c.insert_aimed(&other, false, plane_point);
+    assert_eq!(c.averaged(), before);
+    // Nor is a sample of the point that was not aimed at it (a jittered pick that happens to
+    // land there), nor one aimed at a point another pixel shows.
+    c.insert(&shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1));
+    c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::ONE, 1), false, pi.point[on_plane + 1]);
+    assert_eq!((c.averaged(), count(&c, on_plane)), (before, Some(4)));
+    // A sample of a later epoch (an object moved meanwhile) replaces the point: count 1.
+    c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::splat(0.75), 2), false, plane_point);
+    let p = c.point(pi.point[on_plane]).unwrap();
+    assert_eq!((p.samples, p.color, p.epoch), (1, Vec3::splat(0.75), 2), "replaced in place");
+    assert_eq!(c.averaged(), before);
+    // The sphere moves: its points are carried and stale; the next sample of one replaces it.
+    let to = glam::Affine3A::from_translation(Vec3::new(0.0, 0.0, 1e-3));
+    assert!(c.move_object(0, &glam::Affine3A::IDENTITY, &to) > 0);
+    c.reproject_points(&cam, None, &mut StageTimes::new());
+    let slot = c.point_image().point[on_sphere];
+    let carried = c.point(slot).unwrap();
+    assert_eq!((carried.object, carried.samples, carried.age), (0, 4, STALE_AGE), "carried with its count, stale");
+    let [sx, sy] = xy(on_sphere);
+    let aimed = (sx as f32 + c.point_image().subpixel[on_sphere][0], sy as f32 + c.point_image().subpixel[on_sphere][1]);
+    // Shaded where the sphere is now (its carried point), at the same epoch.
+    let mut s = shade(&cam, [sx, sy], aimed, Vec3::splat(0.9), 1);
+    s.position = carried.position;
+    c.insert_aimed(&s, false, slot);
+    let p = c.point(slot).unwrap();
+    assert_eq!((p.samples, p.color, p.age), (1, Vec3::splat(0.9), 0.0), "a stale point is replaced, not averaged");
+    // A stale sample never joins a point either.
+    let before = c.len();
+    assert!(c.insert_aimed(&shade(&cam, [x, y], aim(on_plane), Vec3::ZERO, 2), true, plane_point));
+    assert_eq!(c.point(pi.point[on_plane]).unwrap().samples, 1);
+    assert_eq!(c.len(), before + 1, "it became a point of its own");
+    // Removing the plane's points removes their counts with them.
+    c.invalidate_objects(&[1]);
+    assert!(c.point(pi.point[on_plane]).is_none());
+}
+
+#[test]
+fn picks_aim_only_at_fresh_usable_points() {
+    let (w, h) = (12u32, 10u32);
+    let cam = camera(w, h);
+    let mut rng = Rng::new(21);
+    let mut c = RenderCache::new(CacheConfig::new(w, h));
+    // Points in every other column; the rest of the pixels have none.
+    for y in 0..h {
+        for x in (0..w).step_by(2) {
+            c.insert(&shade(&cam, [x, y], (x as f32 + rng.unit(), y as f32 + rng.unit()), Vec3::ONE, 1));
+        }
+    }
+    c.reproject_points(&cam, None, &mut StageTimes::new());
+    let pi = c.point_image().clone();
+    let jittered: Vec<PixelRequest> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| PixelRequest { x, y, sx: x as f32 + 0.123, sy: y as f32 + 0.877, point: NO_POINT })
+        .collect();
+    let mut picks = jittered.clone();
+    // Row 0 unusable (as edge-ambiguous samples are).
+    aim_at_points(&mut picks, &pi, |_, y| y != 0);
+    for (p, j) in picks.iter().zip(&jittered) {
+        let i = (p.y * w + p.x) as usize;
+        let aimed = pi.point[i] != NO_POINT && p.y != 0;
+        if aimed {
+            assert_eq!((p.sx, p.sy), (p.x as f32 + pi.subpixel[i][0], p.y as f32 + pi.subpixel[i][1]));
+        } else {
+            assert_eq!((p.sx, p.sy), (j.sx, j.sy), "pixel {},{} keeps its jitter", p.x, p.y);
+        }
+    }
+    assert!(picks.iter().zip(&jittered).filter(|(p, j)| p != j).count() >= 40);
+    // Stale points are not aimed at.
+    c.mark_stale();
+    c.reproject_points(&cam, None, &mut StageTimes::new());
+    let mut picks = jittered.clone();
+    aim_at_points(&mut picks, c.point_image(), |_, _| true);
+    assert_eq!(picks, jittered);
+}
