@@ -9,6 +9,7 @@ pub mod cli;
 mod lambert_oracle;
 pub mod loaded;
 pub mod metrics;
+pub mod ray_oracle;
 mod rng;
 pub mod service;
 pub mod shade;
