@@ -204,6 +204,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         let inst = Instances::new(&bvh, &[tf]);
         Ok(WorkerTracer { bvh, inst })
     })?;
+    let shape = worker.bvh.objects[0].shape();
     entries.push(Entry { name: "worker", tracer: Box::new(worker), build_ms: ms });
     let (base, ms) = timed_builds(a.repeat, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
     entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms });
@@ -298,6 +299,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         .map(|e| (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms})))
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
+    table.push_str(&format!("  worker BVH: {} nodes, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
     table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
     let out = json!({
         "mesh": a.mesh.display().to_string(),
@@ -308,6 +310,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "embree3_in_process": cfg!(feature = "embree"),
         "workloads": rows,
         "build_one_thread": builds,
+        "worker_bvh": {"nodes": shape.nodes, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": {
             "worker_over_baseline": wb / crate::stats::median(&entries[1].build_ms),
             "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,

@@ -1,6 +1,6 @@
-//! Two-level BVH (DESIGN.md "shader-worker"): one obvhs `CwBvh` per object, built once in
-//! OBJECT space, and a small top level over the instances' world boxes, rebuilt per transform
-//! epoch in microseconds. A ray is transformed into each candidate instance's object space by
+//! Two-level BVH (DESIGN.md "shader-worker"): one 8-wide BVH per object ([`wide`], built
+//! by obvhs and collapsed here), built once in OBJECT space, and a small top level of the
+//! same kind over the instances' world boxes, rebuilt per transform epoch in microseconds. A ray is transformed into each candidate instance's object space by
 //! the inverse affine with its direction NOT renormalised, so `t` stays in world units and
 //! hits from different instances compare directly. Moving an object rebuilds nothing of its
 //! own BVH — the property paper 000 §6.5 relies on for moving objects.
@@ -14,8 +14,8 @@ use obvhs::triangle::Triangle;
 use tri4::Tri4;
 use wide::{Bvh8, Bvh8Build, LeafSlots, PreparedRay};
 
-/// One object's BVH in object space: an 8-wide tree whose leaves are blocks of up to 3
-/// triangles (obvhs' `CwBvh` leaf size) tested together.
+/// One object's BVH in object space: an 8-wide tree whose leaves are blocks of up to 4
+/// triangles tested together ([`tri4`]).
 pub struct ObjectBvh {
     bvh: Bvh8,
     /// One block per leaf (the leaf payload indexes it).
@@ -47,6 +47,19 @@ impl ObjectBvh {
         let normals = tri_index.iter().map(|&i| mesh.face_normals[i as usize].into()).collect();
         ObjectBvh { bvh, blocks, tri_index, normals, bounds: mesh.bounds }
     }
+
+    /// The tree's size: what build-quality changes are judged by next to the ray rate.
+    pub fn shape(&self) -> BvhShape {
+        BvhShape { nodes: self.bvh.node_count(), leaves: self.blocks.len(), triangles: self.tri_index.len() }
+    }
+}
+
+/// Node, leaf and triangle counts of one object's BVH.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BvhShape {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub triangles: usize,
 }
 
 /// Per-object BVHs of a whole scene (built once per scene).
