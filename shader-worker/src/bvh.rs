@@ -18,12 +18,10 @@ use wide::{Bvh8, Bvh8Build, LeafSlots, PreparedRay};
 /// triangles tested together ([`tri4`]).
 pub struct ObjectBvh {
     bvh: Bvh8,
-    /// One block per leaf (the leaf payload indexes it).
+    /// One block per leaf (the leaf payload indexes it), holding the mesh's triangle
+    /// indices: a hit needs nothing else.
     blocks: Vec<Tri4>,
-    /// BVH primitive slot -> triangle index in the mesh.
-    tri_index: Vec<u32>,
-    /// Unit object-space face normal per BVH slot (mesh winding).
-    normals: Vec<Vec3A>,
+    triangles: usize,
     bounds: (Vec3, Vec3),
 }
 
@@ -36,21 +34,20 @@ impl ObjectBvh {
             })
             .collect();
         let boxes: Vec<Aabb> = triangles.iter().map(|t| t.aabb()).collect();
-        let Bvh8Build { bvh, leaves, prims: tri_index } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes));
+        let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes));
         let blocks = leaves
             .iter()
             .map(|l: &LeafSlots| {
-                let tris: Vec<(u32, [Vec3; 3])> = (l.first..l.first + l.count).map(|s| (s, mesh.triangle(tri_index[s as usize] as usize))).collect();
+                let tris: Vec<(u32, [Vec3; 3])> = prims[l.first as usize..(l.first + l.count) as usize].iter().map(|&f| (f, mesh.triangle(f as usize))).collect();
                 Tri4::new(&tris)
             })
             .collect();
-        let normals = tri_index.iter().map(|&i| mesh.face_normals[i as usize].into()).collect();
-        ObjectBvh { bvh, blocks, tri_index, normals, bounds: mesh.bounds }
+        ObjectBvh { bvh, blocks, triangles: prims.len(), bounds: mesh.bounds }
     }
 
     /// The tree's size: what build-quality changes are judged by next to the ray rate.
     pub fn shape(&self) -> BvhShape {
-        BvhShape { nodes: self.bvh.node_count(), leaves: self.blocks.len(), triangles: self.tri_index.len() }
+        BvhShape { nodes: self.bvh.node_count(), leaves: self.blocks.len(), triangles: self.triangles }
     }
 }
 
@@ -145,7 +142,7 @@ impl Instances {
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let ray = PreparedRay::new(origin.into(), dir.into(), tmin);
         let mut t = tmax;
-        let mut best: Option<(u32, u32, Vec3A, Vec3A)> = None;
+        let mut best: Option<(u32, u32, usize, Vec3A, Vec3A)> = None;
         self.top.traverse(&ray, &mut t, |leaf, t| {
             let l = &self.top_leaves[leaf as usize];
             for s in l.first..l.first + l.count {
@@ -156,25 +153,25 @@ impl Instances {
                     let block = &o.blocks[b as usize];
                     if let Some((lane, th)) = block.intersect(local.origin, local.direction, local.tmin, *t) {
                         *t = th;
-                        best = Some((obj, block.slot[lane], local.origin, local.direction));
+                        best = Some((obj, b, lane, local.origin, local.direction));
                     }
                     false
                 });
             }
             false
         });
-        let (object, slot, lo, ld) = best?;
-        let o = &bvh.objects[object as usize];
-        let local_normal = o.normals[slot as usize];
-        let normal = (self.normal_to_world[object as usize] * local_normal).normalize_or_zero();
+        let (object, b, lane, lo, ld) = best?;
+        let block = &bvh.objects[object as usize].blocks[b as usize];
+        let local_normal = block.normal(lane);
+        let normal = (self.normal_to_world[object as usize] * Vec3A::from(local_normal)).normalize_or_zero();
         Some(Hit {
             object,
-            triangle: o.tri_index[slot as usize],
+            triangle: block.tri[lane],
             t,
             position: origin + dir * t,
             local: (lo + ld * t).into(),
             normal: normal.into(),
-            local_normal: local_normal.into(),
+            local_normal,
         })
     }
 

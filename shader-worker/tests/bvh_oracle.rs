@@ -326,6 +326,8 @@ fn random_triangle_soups_match_brute_force_closest_and_any_hit() {
                 (None, None) => assert!(!any, "case {case}: any hit without a closest hit"),
                 (Some(g), Some((_, wt, t, margin))) => {
                     hits += 1;
+                    // The hit's normal is the mesh's face normal, bit for bit.
+                    assert_eq!(g.local_normal, scene.objects[0].mesh.face_normals[g.triangle as usize], "case {case}");
                     // f32 coordinates of magnitude ~1: absolute errors of a few 1e-7 at any distance.
                     assert!((g.t as f64 - t).abs() <= 1e-5 * (t + 1.0), "case {case}: t {} vs {t}", g.t);
                     if g.triangle != wt {

@@ -4,28 +4,40 @@
 //! determinant 0, never a hit).
 use glam::{Vec3, Vec3A};
 
-/// Up to four triangles and their primitive slots (`u32::MAX` in unused lanes).
+/// Up to four triangles and their indices in the mesh (`u32::MAX` in unused lanes).
 #[derive(Clone, Copy)]
 #[repr(C, align(16))]
 pub struct Tri4 {
     /// v0.x, v0.y, v0.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z — 4 lanes each.
     c: [[f32; 4]; 9],
-    pub slot: [u32; 4],
+    pub tri: [u32; 4],
 }
 
 impl Tri4 {
-    /// A block of up to 4 triangles (`(slot, [a, b, c])`).
+    /// A block of up to 4 triangles (`(index in the mesh, [a, b, c])`).
     pub fn new(tris: &[(u32, [Vec3; 3])]) -> Tri4 {
         assert!(tris.len() <= 4, "a Tri4 block holds at most 4 triangles");
-        let mut block = Tri4 { c: [[0.0; 4]; 9], slot: [u32::MAX; 4] };
-        for (lane, (slot, [a, b, c])) in tris.iter().enumerate() {
+        let mut block = Tri4 { c: [[0.0; 4]; 9], tri: [u32::MAX; 4] };
+        for (lane, (tri, [a, b, c])) in tris.iter().enumerate() {
             let (e1, e2) = (*b - *a, *c - *a);
             for (k, v) in [a.x, a.y, a.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z].into_iter().enumerate() {
                 block.c[k][lane] = v;
             }
-            block.slot[lane] = *slot;
+            block.tri[lane] = *tri;
         }
         block
+    }
+
+    /// The unit geometric normal of the triangle in `lane` (mesh winding), computed exactly
+    /// as the mesh computes its face normals (`(b - a) × (c - a)`, normalised) from the
+    /// same edges, so it equals `Mesh::face_normals` bit for bit; read from the block the
+    /// hit just loaded rather than from a normal array that would be one more cache miss.
+    #[inline]
+    pub fn normal(&self, lane: usize) -> Vec3 {
+        let c = &self.c;
+        let e1 = Vec3::new(c[3][lane], c[4][lane], c[5][lane]);
+        let e2 = Vec3::new(c[6][lane], c[7][lane], c[8][lane]);
+        e1.cross(e2).normalize_or_zero()
     }
 
     /// The nearest lane hit with `tmin <= t <= tmax`: (lane, t).
