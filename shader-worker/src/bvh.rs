@@ -130,12 +130,18 @@ impl Instances {
         }
     }
 
-    /// The object-space ray of instance `obj` (direction not renormalised: t stays in world
-    /// units).
+    /// Calls `f(object id, its BVH, the ray in its space)` for each instance of top-level
+    /// leaf `leaf` until `f` returns `true` (and then returns `true`). The object-space
+    /// ray's direction is not renormalised: t stays in world units.
     #[inline(always)]
-    fn local_ray(&self, obj: u32, ray: &PreparedRay) -> PreparedRay {
-        let inv = &self.to_object[obj as usize];
-        PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin)
+    fn leaf_instances<'a>(&self, bvh: &'a SceneBvh, leaf: u32, ray: &PreparedRay, mut f: impl FnMut(u32, &'a ObjectBvh, &PreparedRay) -> bool) -> bool {
+        let l = &self.top_leaves[leaf as usize];
+        (l.first..l.first + l.count).any(|s| {
+            let obj = self.slot_object[s as usize];
+            let inv = &self.to_object[obj as usize];
+            let local = PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin);
+            f(obj, &bvh.objects[obj as usize], &local)
+        })
     }
 
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
@@ -144,12 +150,8 @@ impl Instances {
         let mut t = tmax;
         let mut best: Option<(u32, u32, usize, Vec3A, Vec3A)> = None;
         self.top.traverse(&ray, &mut t, |leaf, t| {
-            let l = &self.top_leaves[leaf as usize];
-            for s in l.first..l.first + l.count {
-                let obj = self.slot_object[s as usize];
-                let o = &bvh.objects[obj as usize];
-                let local = self.local_ray(obj, &ray);
-                o.bvh.traverse(&local, t, |b, t| {
+            self.leaf_instances(bvh, leaf, &ray, |obj, o, local| {
+                o.bvh.traverse(local, t, |b, t| {
                     let block = &o.blocks[b as usize];
                     if let Some((lane, th)) = block.intersect(local.origin, local.direction, local.tmin, *t) {
                         *t = th;
@@ -157,8 +159,8 @@ impl Instances {
                     }
                     false
                 });
-            }
-            false
+                false
+            })
         });
         let (object, b, lane, lo, ld) = best?;
         let block = &bvh.objects[object as usize].blocks[b as usize];
@@ -190,22 +192,17 @@ impl Instances {
         let mut t = tmax;
         let mut blocker = None;
         self.top.traverse(&ray, &mut t, |leaf, t| {
-            let l = &self.top_leaves[leaf as usize];
-            for s in l.first..l.first + l.count {
-                let obj = self.slot_object[s as usize];
-                let o = &bvh.objects[obj as usize];
-                let local = self.local_ray(obj, &ray);
+            self.leaf_instances(bvh, leaf, &ray, |obj, o, local| {
                 let mut hit = false;
-                o.bvh.traverse(&local, t, |b, t| {
+                o.bvh.traverse(local, t, |b, t| {
                     hit = o.blocks[b as usize].any(local.origin, local.direction, local.tmin, *t);
                     hit
                 });
                 if hit {
                     blocker = Some(obj);
-                    return true;
                 }
-            }
-            false
+                hit
+            })
         });
         blocker
     }
