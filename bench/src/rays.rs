@@ -306,7 +306,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         .map(|e| (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms})))
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
-    table.push_str(&format!("  worker BVH: {} nodes, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
+    table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
     table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
     let out = json!({
         "mesh": a.mesh.display().to_string(),
@@ -318,7 +318,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "embree3_in_process": cfg!(feature = "embree"),
         "workloads": rows,
         "build_one_thread": builds,
-        "worker_bvh": {"nodes": shape.nodes, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
+        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": {
             "worker_over_baseline": wb / crate::stats::median(&entries[1].build_ms),
             "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,

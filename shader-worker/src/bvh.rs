@@ -47,14 +47,16 @@ impl ObjectBvh {
 
     /// The tree's size: what build-quality changes are judged by next to the ray rate.
     pub fn shape(&self) -> BvhShape {
-        BvhShape { nodes: self.bvh.node_count(), leaves: self.blocks.len(), triangles: self.triangles }
+        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.blocks.len(), triangles: self.triangles }
     }
 }
 
-/// Node, leaf and triangle counts of one object's BVH.
+/// Node, level, leaf and triangle counts of one object's BVH.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BvhShape {
     pub nodes: usize,
+    /// Levels of 8-wide nodes.
+    pub depth: usize,
     pub leaves: usize,
     pub triangles: usize,
 }

@@ -10,6 +10,7 @@
 //! a leaf is one [`super::tri4`] block (≤ 4 triangles in one SIMD test; 2.9 per leaf on the
 //! dragon).
 use glam::Vec3A;
+use std::mem::MaybeUninit;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
@@ -20,8 +21,9 @@ use obvhs::BvhBuildParams;
 const EMPTY: u32 = u32::MAX;
 /// A child code with this bit set is a leaf; the other bits are its payload.
 const LEAF: u32 = 1 << 31;
-/// Deepest stack a traversal needs: ≤ 7 deferred children per level of a BVH8 whose depth
-/// obvhs keeps below 32.
+/// Stack entries a traversal keeps on the thread's stack: ≤ 7 deferred children per level
+/// of a tree up to 32 levels deep (the dragon's is 9). A deeper tree (a degenerate mesh can
+/// make PLOC's binary tree arbitrarily deep) traverses with a heap stack of its own size.
 const STACK: usize = 7 * 32 + 1;
 
 /// One node: per child, its box as six 8-lane planes (min x, max x, min y, max y, min z,
@@ -158,6 +160,8 @@ impl Node8 {
 /// An 8-wide BVH over some primitives; what a leaf payload means is up to the owner.
 pub struct Bvh8 {
     nodes: Vec<Node8>,
+    /// Levels of nodes (1 for a root whose children are all leaves).
+    depth: usize,
 }
 
 /// A leaf's primitives: `Bvh8Build::prims[first..first + count]`.
@@ -183,13 +187,13 @@ impl Bvh8 {
     /// block beats a deeper tree), and a node opens its largest-area inner children until
     /// it has 8 (the usual BVH2-to-BVH8 collapse). Child boxes are obvhs' exact f32 boxes.
     pub fn from_bvh2(b2: &Bvh2) -> Bvh8Build {
-        let mut out = Bvh8Build { bvh: Bvh8 { nodes: Vec::new() }, leaves: Vec::new(), prims: Vec::new() };
+        let mut out = Bvh8Build { bvh: Bvh8 { nodes: Vec::new(), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
         if b2.nodes.is_empty() {
             return out;
         }
         let counts = subtree_counts(b2);
         out.bvh.nodes.push(EMPTY_NODE);
-        collapse(b2, &counts, &[0], 0, &mut out);
+        collapse(b2, &counts, &[0], 0, 1, &mut out);
         out
     }
 
@@ -197,15 +201,29 @@ impl Bvh8 {
         self.nodes.len()
     }
 
+    pub fn depth(&self) -> usize {
+        self.depth
+    }
+
     /// Visits the leaves the ray meets within `[tmin, *tmax]`, nearest box first.
     /// `leaf(payload, tmax)` tests the leaf's primitives, lowers `*tmax` to a closer hit and
     /// returns `true` to stop the traversal (an any-hit query that found one).
     #[inline(always)]
-    pub fn traverse(&self, ray: &PreparedRay, tmax: &mut f32, mut leaf: impl FnMut(u32, &mut f32) -> bool) {
+    pub fn traverse(&self, ray: &PreparedRay, tmax: &mut f32, leaf: impl FnMut(u32, &mut f32) -> bool) {
         if self.nodes.is_empty() {
             return;
         }
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        let need = 7 * self.depth + 1;
+        if need <= STACK {
+            self.traverse_on(&mut [MaybeUninit::uninit(); STACK], ray, tmax, leaf)
+        } else {
+            self.traverse_on(&mut vec![MaybeUninit::uninit(); need], ray, tmax, leaf)
+        }
+    }
+
+    /// [`Self::traverse`] with `stack` holding at least `7 * depth + 1` entries.
+    #[inline(always)]
+    fn traverse_on(&self, stack: &mut [MaybeUninit<(u32, f32)>], ray: &PreparedRay, tmax: &mut f32, mut leaf: impl FnMut(u32, &mut f32) -> bool) {
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -307,7 +325,8 @@ fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
 }
 
 /// Fills node `at` with the subtrees `roots` of `b2`, opened up to 8 children.
-fn collapse(b2: &Bvh2, counts: &[u32], roots: &[usize], at: usize, out: &mut Bvh8Build) {
+fn collapse(b2: &Bvh2, counts: &[u32], roots: &[usize], at: usize, depth: usize, out: &mut Bvh8Build) {
+    out.bvh.depth = out.bvh.depth.max(depth);
     let mut kids: Vec<usize> = roots.to_vec();
     // Open the largest inner child that is not to become a leaf, while there is room.
     while kids.len() < 8 {
@@ -344,6 +363,48 @@ fn collapse(b2: &Bvh2, counts: &[u32], roots: &[usize], at: usize, out: &mut Bvh
     out.bvh.nodes[at] = node;
     for (i, k) in inner {
         let first = b2.nodes[k].first_index as usize;
-        collapse(b2, counts, &[first, first + 1], node.child[i] as usize, out);
+        collapse(b2, counts, &[first, first + 1], node.child[i] as usize, depth + 1, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Boxes nested inside each other around one point (all on the same Morton code) and a
+    /// ray through that point: every leaf is visited, whatever depth PLOC's tree takes, on
+    /// the fixed stack or the heap one.
+    #[test]
+    fn every_box_around_the_ray_is_visited_at_any_depth() {
+        for n in [1usize, 5, 64, 3000] {
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|k| {
+                    let h = 1.0 + k as f32 * 0.01;
+                    Aabb::new(Vec3A::splat(-h), Vec3A::new(h, h * (1.0 + (k % 7) as f32), h))
+                })
+                .collect();
+            let b = Bvh8::from_bvh2(&build_bvh2(&boxes));
+            let mut seen = vec![0u32; n];
+            let ray = PreparedRay::new(Vec3A::new(0.0, 0.0, -100.0), Vec3A::Z, 0.0);
+            let mut tmax = f32::INFINITY;
+            b.bvh.traverse(&ray, &mut tmax, |leaf, _| {
+                let l = &b.leaves[leaf as usize];
+                for &p in &b.prims[l.first as usize..(l.first + l.count) as usize] {
+                    seen[p as usize] += 1;
+                }
+                false
+            });
+            eprintln!("{n} nested boxes: depth {}", b.bvh.depth());
+            assert!(seen.iter().all(|&c| c == 1), "n {n}: depth {}, {} boxes seen", b.bvh.depth(), seen.iter().filter(|&&c| c == 1).count());
+            // A ray beside every box meets none.
+            let mut visited = 0;
+            let beside = PreparedRay::new(Vec3A::new(1000.0, 0.0, -100.0), Vec3A::Z, 0.0);
+            let mut far = f32::INFINITY;
+            b.bvh.traverse(&beside, &mut far, |_, _| {
+                visited += 1;
+                false
+            });
+            assert_eq!(visited, 0);
+        }
     }
 }
