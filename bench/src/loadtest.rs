@@ -13,7 +13,7 @@
 //!   again in the frames' `live_workers`).
 //!
 //! Everything runs on this machine (loopback); figures are ratios and spreads, not promises.
-use crate::rays::{to_wire, RayGen};
+use crate::requests::{to_wire, RayGen};
 use crate::stats::{mean, percentile};
 use anyhow::{bail, Context, Result};
 use edgepoint_proto as pb;
@@ -46,7 +46,7 @@ pub struct LoadtestArgs {
     #[arg(long, default_value = "direct")]
     pub shader: String,
     /// Shader parameter KEY=VALUE (repeatable).
-    #[arg(long = "shader-param", value_parser = crate::rays::parse_param)]
+    #[arg(long = "shader-param", value_parser = crate::requests::parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Requests per batch in the workers phase.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]

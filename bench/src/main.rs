@@ -32,6 +32,9 @@
 //!   slide, camera path file) against the converged reference of its exact state: PSNR,
 //!   SSIM, outlier pixels, the moved object's coverage, frames to fill newly exposed
 //!   regions; edge-and-point and Render Cache side by side.
+//! - `rays`: the worker's ray rate (Mrays/s, 1 and 2 threads) on a mesh's primary, shadow
+//!   and incoherent rays and its BVH build time, against the traversal before (and Embree
+//!   with the `embree` feature) in the same process, and the Embree figures.
 
 mod clock;
 mod converge;
@@ -47,6 +50,7 @@ mod motion;
 mod loadtest;
 mod quality;
 mod rays;
+mod requests;
 mod reference_cache;
 mod stats;
 mod throughput;
@@ -104,6 +108,9 @@ enum Cmd {
     /// Fuzz the scene parsers: mutated seed inputs; panics, slow parses and out-of-proportion
     /// allocations are findings, kept in the crash corpus.
     Fuzz(fuzz::FuzzArgs),
+    /// The worker's ray rate on a mesh (primary, shadow, incoherent rays; 1 and 2 threads) and
+    /// BVH build time, against the traversal before and Embree (feature `embree`).
+    Rays(rays::RaysArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -124,6 +131,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Motion(a) => motion::run(a),
         Cmd::Converge(a) => converge::run(a),
         Cmd::Fuzz(a) => fuzz::run(a),
+        Cmd::Rays(a) => rays::run(a),
     }
 }
 

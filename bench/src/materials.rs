@@ -107,7 +107,7 @@ pub fn run(a: MaterialsArgs) -> Result<()> {
     let inst = loaded.instances(&loaded.default_transforms());
     let spec = ShaderSpec::parse("direct", &HashMap::new()).map_err(|e| anyhow::anyhow!(e))?;
     let ShaderSpec::Direct(params) = spec.clone();
-    let mut gen = crate::rays::RayGen::new(&camera, 7);
+    let mut gen = crate::requests::RayGen::new(&camera, 7);
     let prepared: Vec<Vec<RayRequest>> = (0..64).map(|_| gen.batch(a.batch)).collect();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let rate = |before: bool| {

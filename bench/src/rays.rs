@@ -1,64 +1,339 @@
-//! Request generation shared by the worker benchmarks (`throughput`, `loadtest`): random
-//! primary rays over the image, as the renderer's sparse sampling requests them, and their
-//! wire batches.
-use edgepoint_proto as pb;
-use edgepoint_worker::RayRequest;
-use std::collections::HashMap;
+//! `edgepoint-bench rays`: the worker's ray rate on one mesh (issue 14 item 5), on the
+//! issue's three workloads — a 1024² pinhole camera's primary rays, shadow rays from their
+//! hits to a point light, 2^20 random incoherent closest-hit rays — one ray at a time, on 1
+//! and 2 threads, with the BVH build time. Baselines in the same process: the worker's
+//! traversal as it was before this work ([`obvhs_baseline`]) and, with the `embree`
+//! feature, Embree 3 from Debian ([`embree`]); the issue's Embree 4.4 figures on this
+//! machine are reported as the constants they are. A subset of every workload is checked
+//! against brute force.
+#[cfg(feature = "embree")]
+mod embree;
+mod obvhs_baseline;
+mod workloads;
 
-/// Parses a `--shader-param KEY=VALUE`.
-pub fn parse_param(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
-    let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
-    Ok((k.trim().to_string(), v))
+use anyhow::{Context, Result};
+use edgepoint_scene::Mesh;
+use edgepoint_server::reference::LogProgress;
+use edgepoint_worker::{ray_oracle, Instances, SceneBvh};
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+use serde_json::{json, Value};
+use std::time::Instant;
+use workloads::{Workload, WorkloadKind};
+
+#[derive(clap::Args, Debug)]
+pub struct RaysArgs {
+    /// The mesh (.ply / .obj; e.g. ../shared/data/dragon/dragon_vrip.ply). Its largest
+    /// object is traced alone (a bare model's staging floor is left out).
+    #[arg(long)]
+    pub mesh: std::path::PathBuf,
+    /// Timed runs per tracer, workload and thread count; the median is reported.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: u32,
+    /// Image side of the primary-ray camera (the issue's workload: 1024).
+    #[arg(long, default_value_t = 1024)]
+    pub resolution: u32,
+    /// Number of random incoherent rays (the issue's workload: 2^20 = 1048576).
+    #[arg(long, default_value_t = 1 << 20)]
+    pub incoherent: usize,
+    /// Rays per workload checked against brute force (every triangle, f64).
+    #[arg(long, default_value_t = 64)]
+    pub verify: usize,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
-/// Random primary rays through a 512x512 image of the scene camera: the same mix the
-/// renderer requests (sparse pixels all over the image).
-pub struct RayGen {
-    cam: edgepoint_scene::camera::CameraFrame,
-    state: u64,
-    next_id: u64,
+/// One ray at a time, closest hit and any hit: what every tracer in the bench offers.
+pub trait Tracer: Sync {
+    /// Nearest hit with `0 <= t <= tmax`: (t in units of |d|, triangle index in the mesh).
+    fn closest(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32)>;
+    /// Whether anything lies on the segment `0 <= t <= tmax`.
+    fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool;
 }
 
-impl RayGen {
-    pub fn new(camera: &edgepoint_scene::Camera, seed: u64) -> Self {
-        RayGen { cam: camera.frame(512, 512), state: seed | 1, next_id: 0 }
+/// The worker's tracer exactly as the shaders call it: the two-level BVH with one instance.
+struct WorkerTracer {
+    bvh: SceneBvh,
+    inst: Instances,
+}
+
+impl Tracer for WorkerTracer {
+    fn closest(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32)> {
+        self.inst.closest_hit(&self.bvh, o, d, 0.0, tmax).map(|h| (h.t, h.triangle))
     }
-    fn uniform(&mut self) -> f32 {
-        // xorshift64*: enough for spreading rays over the image.
-        self.state ^= self.state >> 12;
-        self.state ^= self.state << 25;
-        self.state ^= self.state >> 27;
-        (self.state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    pub fn batch(&mut self, n: usize) -> Vec<RayRequest> {
-        (0..n)
-            .map(|_| {
-                let (sx, sy) = (self.uniform() * 512.0, self.uniform() * 512.0);
-                let (origin, direction) = self.cam.ray(sx, sy);
-                self.next_id += 1;
-                RayRequest { id: self.next_id, pixel: [sx as u32, sy as u32], origin, direction }
-            })
-            .collect()
+    fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
+        self.inst.occluded(&self.bvh, o, d, 0.0, tmax).is_some()
     }
 }
 
-pub fn to_wire(id: u64, epoch: u64, shader: &str, params: &HashMap<String, f64>, reqs: Vec<RayRequest>) -> pb::RequestBatch {
-    pb::RequestBatch {
-        batch_id: id,
-        epoch,
-        shader: shader.to_string(),
-        params: params.clone(),
-        seed: id,
-        requests: reqs
-            .into_iter()
-            .map(|r| pb::ShadeRequest {
-                id: r.id,
-                pixel_x: r.pixel[0],
-                pixel_y: r.pixel[1],
-                origin: Some(r.origin.into()),
-                direction: Some(r.direction.into()),
-            })
-            .collect(),
+/// Embree 4.4 on this machine, one ray at a time, as issue 14 item 5 states them
+/// (Mrays/s; ranges as measured there). Constants, not measured by this program.
+const ISSUE_EMBREE_1T: [(f64, f64); 3] = [(9.0, 9.0), (6.0, 6.0), (3.0, 3.7)];
+const ISSUE_EMBREE_2T: [(f64, f64); 3] = [(16.5, 17.7), (10.7, 11.3), (6.3, 7.3)];
+const ISSUE_EMBREE_BUILD_MS: (f64, f64) = (255.0, 270.0);
+/// The worker before this work, as the issue measured it (1 thread, 2 threads, build ms).
+const ISSUE_WORKER_1T: [f64; 3] = [2.4, 2.2, 1.2];
+const ISSUE_WORKER_2T: [f64; 3] = [5.4, 4.7, 2.8];
+const ISSUE_WORKER_BUILD_MS: f64 = 576.0;
+/// The issue's hit fractions on the welded dragon (primary hits, shadow rays occluded,
+/// incoherent hits): they check that the workloads are set up as there.
+const ISSUE_HIT_FRACTION: [f64; 3] = [0.548, 0.163, 0.412];
+
+struct Entry {
+    name: &'static str,
+    tracer: Box<dyn Tracer>,
+    build_ms: Vec<f64>,
+}
+
+fn pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("building a thread pool")
+}
+
+/// Runs `build` on a one-thread pool `repeat` times: (the last result, the times in ms of
+/// process CPU time — one build thread, so CPU time is its time without the other jobs on
+/// a shared machine; it counts Embree's own build thread too).
+fn timed_builds<T: Send>(repeat: u32, build: impl Fn() -> Result<T> + Sync) -> Result<(T, Vec<f64>)> {
+    let one = pool(1)?;
+    let mut ms = Vec::new();
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        drop(last.take());
+        let t = crate::clock::process_cpu_ms();
+        let built = one.install(&build)?;
+        ms.push(crate::clock::process_cpu_ms() - t);
+        last = Some(built);
     }
+    Ok((last.expect("at least one build"), ms))
+}
+
+/// Traces a workload on the current pool: (seconds, hits or occluded rays). On a
+/// one-thread pool the seconds are the thread's CPU time (all the work runs on it), which
+/// the other jobs on a shared machine inflate far less than the wall clock; on more
+/// threads they are wall-clock seconds.
+fn trace(tracer: &dyn Tracer, w: &Workload) -> (f64, usize) {
+    let one_thread = rayon::current_num_threads() == 1;
+    let (t, cpu0) = (Instant::now(), crate::clock::thread_cpu_ms());
+    let hits = match w.kind {
+        WorkloadKind::Closest => w.rays.par_chunks(1024).map(|c| c.iter().filter(|r| tracer.closest(r.o, r.d, r.tmax).is_some()).count()).sum(),
+        WorkloadKind::Occlusion => w.rays.par_chunks(1024).map(|c| c.iter().filter(|r| tracer.occluded(r.o, r.d, r.tmax)).count()).sum(),
+    };
+    let secs = if one_thread { (crate::clock::thread_cpu_ms() - cpu0) * 1e-3 } else { t.elapsed().as_secs_f64() };
+    (secs, hits)
+}
+
+/// How often two tracers agree on a workload: closest hits on the same triangle (or at the
+/// same t within 1e-5 relative: a tie on a shared edge), and the same occlusion answer.
+fn agreement(a: &dyn Tracer, b: &dyn Tracer, w: &Workload) -> f64 {
+    let same = w
+        .rays
+        .par_iter()
+        .filter(|r| match w.kind {
+            WorkloadKind::Closest => match (a.closest(r.o, r.d, r.tmax), b.closest(r.o, r.d, r.tmax)) {
+                (None, None) => true,
+                (Some((ta, ia)), Some((tb, ib))) => ia == ib || ((ta - tb) / tb.max(1e-12)).abs() < 1e-5,
+                _ => false,
+            },
+            WorkloadKind::Occlusion => a.occluded(r.o, r.d, r.tmax) == b.occluded(r.o, r.d, r.tmax),
+        })
+        .count();
+    same as f64 / w.rays.len().max(1) as f64
+}
+
+/// Brute force on `n` rays spread over the workload: how many of the worker's answers
+/// differ from the f64 oracle, not counting hits within 1e-5 (barycentric) of an edge.
+fn verify(tracer: &dyn Tracer, mesh: &Mesh, tf: Affine3A, w: &Workload, n: usize) -> Value {
+    if n == 0 || w.rays.is_empty() {
+        return json!({"rays": 0});
+    }
+    let step = (w.rays.len() / n).max(1);
+    let picked: Vec<_> = w.rays.iter().step_by(step).take(n).collect();
+    let meshes = [mesh];
+    let tfs = [tf];
+    let (mut wrong, mut grazing, mut max_rel_t) = (0usize, 0usize, 0f64);
+    let results: Vec<_> = picked
+        .par_iter()
+        .map(|r| {
+            let want = ray_oracle::closest(&meshes, &tfs, r.o, r.d, 0.0, r.tmax as f64);
+            (r, want)
+        })
+        .collect();
+    for (r, want) in results {
+        match w.kind {
+            WorkloadKind::Closest => match (tracer.closest(r.o, r.d, r.tmax), want) {
+                (None, None) => {}
+                (Some((t, tri)), Some((_, wt, tw, margin))) => {
+                    let rel = ((t as f64 - tw) / tw.max(1e-12)).abs();
+                    max_rel_t = max_rel_t.max(rel);
+                    let tie = tri != wt && {
+                        let [a, b, c] = ray_oracle::world_triangle(&meshes, &tfs, 0, tri);
+                        ray_oracle::ray_triangle(r.o.as_dvec3(), r.d.as_dvec3(), a, b, c).is_some_and(|t2| ((t2 - tw) / tw).abs() < 1e-6)
+                    };
+                    if rel > 1e-4 || (tri != wt && !tie) {
+                        if margin < 1e-5 {
+                            grazing += 1
+                        } else {
+                            wrong += 1
+                        }
+                    }
+                }
+                (None, Some((_, _, _, margin))) if margin < 1e-5 => grazing += 1,
+                (Some(_), None) => grazing += 1,
+                _ => wrong += 1,
+            },
+            WorkloadKind::Occlusion => {
+                if tracer.occluded(r.o, r.d, r.tmax) != want.is_some() {
+                    if want.is_some_and(|w| w.3 < 1e-5 || w.2 > r.tmax as f64 * 0.9999) {
+                        grazing += 1
+                    } else {
+                        wrong += 1
+                    }
+                }
+            }
+        }
+    }
+    json!({"rays": picked.len(), "wrong": wrong, "on_an_edge": grazing, "max_relative_t_error": max_rel_t})
+}
+
+pub fn run(a: RaysArgs) -> Result<()> {
+    let progress = LogProgress::new("rays");
+    let scene = edgepoint_scene::load::load_path(&a.mesh, &progress).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let object = scene.objects.iter().max_by_key(|o| o.mesh.triangles.len()).context("the file has no mesh")?;
+    let mesh = object.mesh.clone();
+    let tf = object.transform;
+    let (lo, hi) = edgepoint_scene::geometry::transformed_box(&tf, mesh.bounds);
+    tracing::info!("{}: {} triangles, bounds {lo} .. {hi}", a.mesh.display(), mesh.triangles.len());
+
+    // Builds, one thread each (the issue's build figures are one-thread figures).
+    let mut entries = Vec::new();
+    let (worker, ms) = timed_builds(a.repeat, || {
+        let bvh = SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress);
+        let inst = Instances::new(&bvh, &[tf]);
+        Ok(WorkerTracer { bvh, inst })
+    })?;
+    let shape = worker.bvh.objects[0].shape();
+    entries.push(Entry { name: "worker", tracer: Box::new(worker), build_ms: ms });
+    let (base, ms) = timed_builds(a.repeat, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
+    entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms });
+    #[cfg(feature = "embree")]
+    {
+        let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
+        let (e, ms) = timed_builds(a.repeat, || embree::EmbreeMesh::build(&world, &mesh.triangles, 1))?;
+        entries.push(Entry { name: "embree3", tracer: Box::new(e), build_ms: ms });
+    }
+
+    // The workloads; the shadow rays start at the worker's primary hits.
+    let primary = workloads::primary(lo, hi, a.resolution);
+    let shadow = workloads::shadow(lo, hi, &primary, |o, d, tmax| {
+        entries[0].tracer.closest(o, d, tmax).map(|(t, tri)| (t, (tf.matrix3.inverse().transpose() * glam::Vec3A::from(mesh.face_normals[tri as usize])).normalize().into()))
+    });
+    let incoherent = workloads::incoherent(lo, hi, a.incoherent, 0x5eed_0014);
+    let works = [primary, shadow, incoherent];
+
+    let mut rows = Vec::new();
+    let mut table = format!("rays on {} ({} triangles), one ray at a time, median of {}:\n", a.mesh.display(), mesh.triangles.len(), a.repeat.max(1));
+    for (wi, w) in works.iter().enumerate() {
+        let mut per_threads = Vec::new();
+        let mut hit_fraction = json!({});
+        for threads in [1usize, 2] {
+            let p = pool(threads)?;
+            let mut secs = vec![Vec::new(); entries.len()];
+            let mut hits = vec![0usize; entries.len()];
+            // Round-robin over the tracers, so load on the shared machine falls on all alike.
+            for _ in 0..a.repeat.max(1) {
+                for (k, e) in entries.iter().enumerate() {
+                    let (s, h) = p.install(|| trace(e.tracer.as_ref(), w));
+                    secs[k].push(s);
+                    hits[k] = h;
+                }
+            }
+            let mrays: Vec<f64> = secs.iter().map(|s| w.rays.len() as f64 / crate::stats::median(s) / 1e6).collect();
+            let mut tracers = serde_json::Map::new();
+            for (k, e) in entries.iter().enumerate() {
+                tracers.insert(e.name.into(), json!({"mrays_per_s": mrays[k], "seconds": secs[k], "hit_fraction": hits[k] as f64 / w.rays.len() as f64}));
+                hit_fraction[e.name] = json!(hits[k] as f64 / w.rays.len() as f64);
+            }
+            let issue = if threads == 1 { ISSUE_EMBREE_1T[wi] } else { ISSUE_EMBREE_2T[wi] };
+            let issue_worker = if threads == 1 { ISSUE_WORKER_1T[wi] } else { ISSUE_WORKER_2T[wi] };
+            let mut ratios = json!({
+                "worker_over_baseline": mrays[0] / mrays[1],
+                "worker_over_issue_embree44_low": mrays[0] / issue.0,
+                "worker_over_issue_embree44_high": mrays[0] / issue.1,
+            });
+            table.push_str(&format!(
+                "  {:<10} {} thread{}: worker {:6.2} Mrays/s, baseline {:6.2} ({:4.2}x), issue's Embree 4.4 {}-{} ({:4.2}x of the high end)",
+                w.name,
+                threads,
+                if threads == 1 { " " } else { "s" },
+                mrays[0],
+                mrays[1],
+                mrays[0] / mrays[1],
+                issue.0,
+                issue.1,
+                mrays[0] / issue.1
+            ));
+            if let Some(k) = entries.iter().position(|e| e.name == "embree3") {
+                ratios["worker_over_embree3_same_process"] = json!(mrays[0] / mrays[k]);
+                table.push_str(&format!(", Embree 3 here {:6.2} ({:4.2}x)", mrays[k], mrays[0] / mrays[k]));
+            }
+            table.push('\n');
+            per_threads.push(json!({
+                "threads": threads,
+                "tracers": tracers,
+                "ratios": ratios,
+                "issue_embree44_mrays_per_s": [issue.0, issue.1],
+                "issue_worker_before_mrays_per_s": issue_worker,
+            }));
+        }
+        let agree: serde_json::Map<_, _> = entries[1..].iter().map(|e| (format!("worker_vs_{}", e.name), json!(agreement(entries[0].tracer.as_ref(), e.tracer.as_ref(), w)))).collect();
+        let check = verify(entries[0].tracer.as_ref(), &mesh, tf, w, a.verify);
+        table.push_str(&format!(
+            "  {:<10} {} rays, hit fraction {:.3}; agreement {:?}; brute force on {}: {} wrong, {} on an edge\n",
+            w.name, w.rays.len(), hit_fraction["worker"].as_f64().unwrap_or(0.0), agree, check["rays"], check["wrong"], check["on_an_edge"]
+        ));
+        rows.push(json!({
+            "workload": w.name,
+            "rays": w.rays.len(),
+            "hit_fraction": hit_fraction,
+            "issue_hit_fraction": ISSUE_HIT_FRACTION[wi],
+            "agreement": agree,
+            "brute_force": check,
+            "runs": per_threads,
+        }));
+    }
+    let builds: serde_json::Map<_, _> = entries
+        .iter()
+        .map(|e| (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms})))
+        .collect();
+    let wb = crate::stats::median(&entries[0].build_ms);
+    table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
+    table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
+    let out = json!({
+        "mesh": a.mesh.display().to_string(),
+        "triangles": mesh.triangles.len(),
+        "bounds": [lo.to_array(), hi.to_array()],
+        "resolution": a.resolution,
+        "repeat": a.repeat.max(1),
+        "timing": "1 thread: CPU time of the tracing thread; 2 threads: wall clock; builds: process CPU time on a one-thread pool",
+        "embree3_in_process": cfg!(feature = "embree"),
+        "workloads": rows,
+        "build_one_thread": builds,
+        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
+        "build_ratios": {
+            "worker_over_baseline": wb / crate::stats::median(&entries[1].build_ms),
+            "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,
+            "worker_over_issue_embree44_high": wb / ISSUE_EMBREE_BUILD_MS.1,
+        },
+        "issue_constants": {
+            "note": "Measured on this machine by issue 14 item 5 (Embree 4.4, one ray at a time; the worker at main before this work); constants, not measured by this run",
+            "embree44_mrays_per_s_1_thread": {"primary": ISSUE_EMBREE_1T[0], "shadow": ISSUE_EMBREE_1T[1], "incoherent": ISSUE_EMBREE_1T[2]},
+            "embree44_mrays_per_s_2_threads": {"primary": ISSUE_EMBREE_2T[0], "shadow": ISSUE_EMBREE_2T[1], "incoherent": ISSUE_EMBREE_2T[2]},
+            "embree44_build_ms_1_thread": ISSUE_EMBREE_BUILD_MS,
+            "worker_before_mrays_per_s_1_thread": ISSUE_WORKER_1T,
+            "worker_before_mrays_per_s_2_threads": ISSUE_WORKER_2T,
+            "worker_before_build_ms": ISSUE_WORKER_BUILD_MS,
+        },
+    });
+    crate::emit(a.json, &out, &table);
+    Ok(())
 }

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use edgepoint_server::workers::WorkerPool;
 use edgepoint_viewer::client::scene_source_from_arg;
 use edgepoint_viewer::local::{LocalCluster, LocalOptions};
-use crate::rays::{to_wire, RayGen};
+use crate::requests::{to_wire, RayGen};
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShaderSpec};
 use serde_json::json;
 use std::collections::HashMap;
@@ -32,7 +32,7 @@ pub struct ThroughputArgs {
     #[arg(long, default_value = "direct")]
     pub shader: String,
     /// Shader parameter KEY=VALUE (repeatable).
-    #[arg(long = "shader-param", value_parser = crate::rays::parse_param)]
+    #[arg(long = "shader-param", value_parser = crate::requests::parse_param)]
     pub shader_params: Vec<(String, f64)>,
     /// Seconds of shading per measurement.
     #[arg(long, default_value_t = 3.0)]

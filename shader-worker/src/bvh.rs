@@ -1,29 +1,27 @@
-//! Two-level BVH (DESIGN.md "shader-worker"): one obvhs `CwBvh` per object, built once in
-//! OBJECT space, and a small top level over the instances' world boxes, rebuilt per transform
-//! epoch in microseconds. A ray is transformed into each candidate instance's object space by
+//! Two-level BVH (DESIGN.md "shader-worker"): one 8-wide BVH per object ([`wide`], built
+//! by obvhs and collapsed here), built once in OBJECT space, and a small top level of the
+//! same kind over the instances' world boxes, rebuilt per transform epoch in microseconds. A ray is transformed into each candidate instance's object space by
 //! the inverse affine with its direction NOT renormalised, so `t` stays in world units and
 //! hits from different instances compare directly. Moving an object rebuilds nothing of its
 //! own BVH — the property paper 000 §6.5 relies on for moving objects.
+mod tri4;
+mod wide;
+
 use edgepoint_scene::{Mesh, Progress};
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
-use obvhs::cwbvh::builder::{build_cwbvh, build_cwbvh_from_tris};
-use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
-use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
-use obvhs::BvhBuildParams;
-use std::time::Duration;
+use tri4::Tri4;
+use wide::{Bvh8, Bvh8Build, LeafSlots, PreparedRay};
 
-/// One object's BVH in object space; triangles are stored in BVH leaf order so the traversal
-/// callback indexes them directly.
+/// One object's BVH in object space: an 8-wide tree whose leaves are blocks of up to 4
+/// triangles tested together ([`tri4`]).
 pub struct ObjectBvh {
-    bvh: CwBvh,
-    tris: Vec<RtTriangle>,
-    /// BVH primitive slot -> triangle index in the mesh.
-    tri_index: Vec<u32>,
-    /// Unit object-space face normal per BVH slot (mesh winding).
-    normals: Vec<Vec3A>,
+    bvh: Bvh8,
+    /// One block per leaf (the leaf payload indexes it), holding the mesh's triangle
+    /// indices: a hit needs nothing else.
+    blocks: Vec<Tri4>,
+    triangles: usize,
     bounds: (Vec3, Vec3),
 }
 
@@ -35,13 +33,32 @@ impl ObjectBvh {
                 Triangle { v0: a.into(), v1: b.into(), v2: c.into() }
             })
             .collect();
-        let mut t = Duration::ZERO;
-        let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut t);
-        let tri_index = bvh.primitive_indices.clone();
-        let tris = tri_index.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
-        let normals = tri_index.iter().map(|&i| mesh.face_normals[i as usize].into()).collect();
-        ObjectBvh { bvh, tris, tri_index, normals, bounds: mesh.bounds }
+        let boxes: Vec<Aabb> = triangles.iter().map(|t| t.aabb()).collect();
+        let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes));
+        let blocks = leaves
+            .iter()
+            .map(|l: &LeafSlots| {
+                let tris: Vec<(u32, [Vec3; 3])> = prims[l.first as usize..(l.first + l.count) as usize].iter().map(|&f| (f, mesh.triangle(f as usize))).collect();
+                Tri4::new(&tris)
+            })
+            .collect();
+        ObjectBvh { bvh, blocks, triangles: prims.len(), bounds: mesh.bounds }
     }
+
+    /// The tree's size: what build-quality changes are judged by next to the ray rate.
+    pub fn shape(&self) -> BvhShape {
+        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.blocks.len(), triangles: self.triangles }
+    }
+}
+
+/// Node, level, leaf and triangle counts of one object's BVH.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BvhShape {
+    pub nodes: usize,
+    /// Levels of 8-wide nodes.
+    pub depth: usize,
+    pub leaves: usize,
+    pub triangles: usize,
 }
 
 /// Per-object BVHs of a whole scene (built once per scene).
@@ -66,42 +83,11 @@ impl SceneBvh {
     }
 }
 
-/// Reciprocals of direction components that are zero (or too small to invert in f32).
-/// Finite, so the slab products of obvhs' node test stay free of `0 · ∞ = NaN`: a node's
-/// quantisation scale times this stays below `f32::MAX` for scenes up to ~1e8 units across.
-const ZERO_DIRECTION_RECIPROCAL: f32 = 1e30;
-
-/// An obvhs ray whose reciprocal direction agrees with obvhs' own slab ordering.
-///
-/// obvhs picks each node's near and far slab planes by `direction < 0.0` but inverts the
-/// direction with `signum(d) / f32::EPSILON` for `|d| <= f32::EPSILON`, and `signum(-0.0)`
-/// is `-1`: a component of `-0.0` — `-Vec3::Y` is `(-0.0, -1.0, -0.0)`, and inverse
-/// instance transforms of exact axis directions produce them too — got a negative
-/// reciprocal with the planes ordered for a positive one, so every slab interval on that
-/// axis came out empty and the ray missed everything (axis-aligned rays onto the Cornell
-/// box floor, for one). Its `±2^23` stand-in for tiny components also shrank the slab
-/// intervals of nearly axis-aligned rays below the true ones. Here every component gets
-/// its exact reciprocal, with `±0.0` (and anything whose reciprocal overflows) mapped to
-/// `±ZERO_DIRECTION_RECIPROCAL` with the sign obvhs orders the planes by (`+` unless
-/// `d < 0.0`). A ray that lies exactly in a box face's plane stays ambiguous, as its
-/// triangle test is.
-fn make_ray(origin: Vec3A, direction: Vec3A, tmin: f32, tmax: f32) -> Ray {
-    let inv = |d: f32| {
-        if d < 0.0 {
-            (1.0 / d).max(-ZERO_DIRECTION_RECIPROCAL)
-        } else if d > 0.0 {
-            (1.0 / d).min(ZERO_DIRECTION_RECIPROCAL)
-        } else {
-            ZERO_DIRECTION_RECIPROCAL
-        }
-    };
-    let inv_direction = Vec3A::new(inv(direction.x), inv(direction.y), inv(direction.z));
-    Ray { origin, direction, inv_direction, tmin, tmax }
-}
-
 /// The top level for one set of object transforms (one epoch).
 pub struct Instances {
-    top: Option<CwBvh>,
+    top: Bvh8,
+    /// Per top-level leaf, its range of top-level primitive slots.
+    top_leaves: Vec<LeafSlots>,
     /// Top-level primitive slot -> object id.
     slot_object: Vec<u32>,
     to_object: Vec<Affine3A>,
@@ -136,47 +122,61 @@ impl Instances {
     pub fn new(bvh: &SceneBvh, transforms: &[Affine3A]) -> Instances {
         assert_eq!(bvh.objects.len(), transforms.len(), "one transform per object");
         let boxes: Vec<Aabb> = bvh.objects.iter().zip(transforms).map(|(o, t)| world_box(t, o.bounds)).collect();
-        let (top, slot_object) = if boxes.is_empty() {
-            (None, Vec::new())
-        } else {
-            let mut d = Duration::ZERO;
-            let top = build_cwbvh(&boxes, BvhBuildParams::fast_build(), &mut d);
-            let slots = top.primitive_indices.clone();
-            (Some(top), slots)
-        };
+        let Bvh8Build { bvh: top, leaves: top_leaves, prims: slot_object } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes));
         Instances {
             top,
+            top_leaves,
             slot_object,
             to_object: transforms.iter().map(|t| t.inverse()).collect(),
             normal_to_world: transforms.iter().map(|t| t.matrix3.inverse().transpose()).collect(),
         }
     }
 
+    /// Calls `f(object id, its BVH, the ray in its space)` for each instance of top-level
+    /// leaf `leaf` until `f` returns `true` (and then returns `true`). The object-space
+    /// ray's direction is not renormalised: t stays in world units.
+    #[inline(always)]
+    fn leaf_instances<'a>(&self, bvh: &'a SceneBvh, leaf: u32, ray: &PreparedRay, mut f: impl FnMut(u32, &'a ObjectBvh, &PreparedRay) -> bool) -> bool {
+        let l = &self.top_leaves[leaf as usize];
+        (l.first..l.first + l.count).any(|s| {
+            let obj = self.slot_object[s as usize];
+            let inv = &self.to_object[obj as usize];
+            let local = PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin);
+            f(obj, &bvh.objects[obj as usize], &local)
+        })
+    }
+
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
-        let top = self.top.as_ref()?;
-        let ray = make_ray(origin.into(), dir.into(), tmin, tmax);
-        let mut best: Option<(u32, u32, Vec3)> = None;
-        let mut top_hit = RayHit::none();
-        top.ray_traverse(ray, &mut top_hit, |r, slot| {
-            let obj = self.slot_object[slot];
-            let inv = &self.to_object[obj as usize];
-            let o = &bvh.objects[obj as usize];
-            let local = make_ray(inv.transform_point3a(r.origin), inv.transform_vector3a(r.direction), r.tmin, r.tmax);
-            let mut h = RayHit::none();
-            if o.bvh.ray_traverse(local, &mut h, |lr, id| o.tris[id].intersect(lr)) {
-                best = Some((obj, h.primitive_id, (local.origin + local.direction * h.t).into()));
-                h.t
-            } else {
-                f32::INFINITY
-            }
+        let ray = PreparedRay::new(origin.into(), dir.into(), tmin);
+        let mut t = tmax;
+        let mut best: Option<(u32, u32, usize, Vec3A, Vec3A)> = None;
+        self.top.traverse(&ray, &mut t, |leaf, t| {
+            self.leaf_instances(bvh, leaf, &ray, |obj, o, local| {
+                o.bvh.traverse(local, t, |b, t| {
+                    let block = &o.blocks[b as usize];
+                    if let Some((lane, th)) = block.intersect(local.origin, local.direction, local.tmin, *t) {
+                        *t = th;
+                        best = Some((obj, b, lane, local.origin, local.direction));
+                    }
+                    false
+                });
+                false
+            })
         });
-        let (object, slot, local) = best?;
-        let t = top_hit.t;
-        let o = &bvh.objects[object as usize];
-        let local_normal = o.normals[slot as usize];
-        let normal = (self.normal_to_world[object as usize] * local_normal).normalize_or_zero();
-        Some(Hit { object, triangle: o.tri_index[slot as usize], t, position: origin + dir * t, local, normal: normal.into(), local_normal: local_normal.into() })
+        let (object, b, lane, lo, ld) = best?;
+        let block = &bvh.objects[object as usize].blocks[b as usize];
+        let local_normal = block.normal(lane);
+        let normal = (self.normal_to_world[object as usize] * Vec3A::from(local_normal)).normalize_or_zero();
+        Some(Hit {
+            object,
+            triangle: block.tri[lane],
+            t,
+            position: origin + dir * t,
+            local: (lo + ld * t).into(),
+            normal: normal.into(),
+            local_normal,
+        })
     }
 
     /// The matrix taking object `object`'s normals to world space (the inverse transpose of
@@ -186,22 +186,25 @@ impl Instances {
         self.normal_to_world[object as usize]
     }
 
-    /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment.
+    /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment. Stops
+    /// at the first hit found (children still visited nearest first: near blockers are the
+    /// likely ones).
     pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
-        let top = self.top.as_ref()?;
-        let ray = make_ray(origin.into(), dir.into(), tmin, tmax);
+        let ray = PreparedRay::new(origin.into(), dir.into(), tmin);
+        let mut t = tmax;
         let mut blocker = None;
-        top.ray_traverse_miss(ray, |r, slot| {
-            let obj = self.slot_object[slot];
-            let inv = &self.to_object[obj as usize];
-            let o = &bvh.objects[obj as usize];
-            let local = make_ray(inv.transform_point3a(r.origin), inv.transform_vector3a(r.direction), r.tmin, r.tmax);
-            if !o.bvh.ray_traverse_miss(local, |lr, id| o.tris[id].intersect(lr)) {
-                blocker = Some(obj);
-                r.tmin // any value < tmax stops the traversal
-            } else {
-                f32::INFINITY
-            }
+        self.top.traverse(&ray, &mut t, |leaf, t| {
+            self.leaf_instances(bvh, leaf, &ray, |obj, o, local| {
+                let mut hit = false;
+                o.bvh.traverse(local, t, |b, t| {
+                    hit = o.blocks[b as usize].any(local.origin, local.direction, local.tmin, *t);
+                    hit
+                });
+                if hit {
+                    blocker = Some(obj);
+                }
+                hit
+            })
         });
         blocker
     }

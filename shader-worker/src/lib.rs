@@ -9,13 +9,14 @@ pub mod cli;
 mod lambert_oracle;
 pub mod loaded;
 pub mod metrics;
+pub mod ray_oracle;
 mod rng;
 pub mod service;
 pub mod shade;
 pub mod surface;
 pub mod triples;
 
-pub use bvh::{Hit, Instances, SceneBvh};
+pub use bvh::{BvhShape, Hit, Instances, SceneBvh};
 pub use loaded::LoadedScene;
 pub use triples::sample_triples;
 pub use shade::{shade_batch, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

@@ -3,31 +3,9 @@ mod common_scenes;
 use common_scenes::*;
 use edgepoint_scene::{NoProgress, Scene};
 use edgepoint_worker::LoadedScene;
-use glam::{Affine3A, DVec3, Quat, Vec3};
+use glam::{Affine3A, Quat, Vec3};
 
-/// Möller–Trumbore in f64: the oracle.
-fn tri_t(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
-    let e1 = b - a;
-    let e2 = c - a;
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-14 {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let s = o - a;
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = e2.dot(q) * inv;
-    (t > 0.0).then_some(t)
-}
+use edgepoint_worker::ray_oracle::{barycentric_margin, ray_triangle as tri_t};
 
 fn brute(scene: &Scene, tf: &[Affine3A], o: Vec3, d: Vec3) -> Option<(u32, u32, f64)> {
     let mut best: Option<(u32, u32, f64)> = None;
@@ -153,29 +131,8 @@ fn bunny_matches_brute_force() {
 /// The nearest triangle along the ray with `t >= tmin`, and how far inside it the hit is
 /// (the smallest barycentric coordinate: near 0 the ray grazes an edge).
 fn brute_margin(scene: &Scene, tf: &[Affine3A], o: Vec3, d: Vec3, tmin: f64) -> Option<(u32, u32, f64, f64)> {
-    let mut best: Option<(u32, u32, f64, f64)> = None;
-    for (oi, obj) in scene.objects.iter().enumerate() {
-        for f in 0..obj.mesh.triangles.len() {
-            let [a, b, c] = obj.mesh.triangle(f).map(|v| tf[oi].transform_point3(v).as_dvec3());
-            if let Some(t) = tri_t(o.as_dvec3(), d.as_dvec3(), a, b, c) {
-                if t >= tmin && best.is_none_or(|x| t < x.2) {
-                    best = Some((oi as u32, f as u32, t, barycentric_margin(o.as_dvec3() + d.as_dvec3() * t, a, b, c)));
-                }
-            }
-        }
-    }
-    best
-}
-
-/// The smallest barycentric coordinate of `p` (in the triangle's plane) in triangle `abc`.
-fn barycentric_margin(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let (e1, e2, r) = (b - a, c - a, p - a);
-    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (r1, r2) = (r.dot(e1), r.dot(e2));
-    let den = d11 * d22 - d12 * d12;
-    let v = (d22 * r1 - d12 * r2) / den;
-    let w = (d11 * r2 - d12 * r1) / den;
-    v.min(w).min(1.0 - v - w)
+    let meshes: Vec<_> = scene.objects.iter().map(|o| o.mesh.as_ref()).collect();
+    edgepoint_worker::ray_oracle::closest(&meshes, tf, o, d, tmin, f64::INFINITY)
 }
 
 /// The six axis directions, each written two ways: with `+0.0` components and negated
@@ -329,4 +286,139 @@ fn axis_aligned_rays_hit_flat_and_solid_instances_like_brute_force() {
         }
         assert!(check_axis_rays(&scene, &tf, 400, 7 + m as u64) > 100, "mesh {m}");
     }
+}
+
+/// Random triangle soups (sizes from slivers to large, many overlapping) and random rays
+/// from inside and outside them: the closest hit's distance and triangle equal brute
+/// force's (up to hits on an edge), and any-hit queries agree with it on segments that end
+/// just before, just after, and at random distances along the ray.
+#[test]
+fn random_triangle_soups_match_brute_force_closest_and_any_hit() {
+    let mut rng = Lcg(77);
+    let (mut hits, mut grazing, mut rays) = (0, 0, 0);
+    for case in 0..12 {
+        let n = [1, 2, 3, 4, 5, 9, 40, 200, 1000, 3000, 64, 500][case];
+        let scale = [0.02, 0.2, 1.0][case % 3];
+        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+        for i in 0..n {
+            let c = rng.v(1.0);
+            for _ in 0..3 {
+                positions.push(c + rng.v(scale));
+            }
+            triangles.push([3 * i as u32, 3 * i as u32 + 1, 3 * i as u32 + 2]);
+        }
+        let mesh = edgepoint_scene::Mesh::from_triangles(positions, triangles, &NoProgress);
+        let objs = vec![object("soup", mesh, 0.5)];
+        let scene = scene(objs, vec![], 0.0);
+        let tf = vec![Affine3A::IDENTITY];
+        let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
+        let inst = loaded.instances(&tf);
+        let meshes: Vec<_> = scene.objects.iter().map(|o| o.mesh.as_ref()).collect();
+        for _ in 0..400 {
+            rays += 1;
+            let o = rng.v(1.5);
+            let d = (rng.v(1.0) - o * 0.5).normalize_or(Vec3::X);
+            let got = inst.closest_hit(&loaded.bvh, o, d, 0.0, f32::INFINITY);
+            let want = edgepoint_worker::ray_oracle::closest(&meshes, &tf, o, d, 0.0, f64::INFINITY);
+            let tmax = rng.f() * 4.0;
+            let any = inst.occluded(&loaded.bvh, o, d, 0.0, tmax).is_some();
+            match (got, want) {
+                (None, None) => assert!(!any, "case {case}: any hit without a closest hit"),
+                (Some(g), Some((_, wt, t, margin))) => {
+                    hits += 1;
+                    // The hit's normal is the mesh's face normal, bit for bit.
+                    assert_eq!(g.local_normal, scene.objects[0].mesh.face_normals[g.triangle as usize], "case {case}");
+                    // f32 coordinates of magnitude ~1: absolute errors of a few 1e-7 at any distance.
+                    assert!((g.t as f64 - t).abs() <= 1e-5 * (t + 1.0), "case {case}: t {} vs {t}", g.t);
+                    if g.triangle != wt {
+                        let [a, b, c] = edgepoint_worker::ray_oracle::world_triangle(&meshes, &tf, 0, g.triangle);
+                        let tie = tri_t(o.as_dvec3(), d.as_dvec3(), a, b, c).is_some_and(|t2| (t2 - t).abs() <= 1e-6 * (t + 1.0));
+                        assert!(tie || margin < 1e-5, "case {case}: triangle {} vs {wt}", g.triangle);
+                    }
+                    if margin >= 1e-5 && ((tmax as f64) - t).abs() > 1e-4 * t {
+                        assert_eq!(any, (tmax as f64) > t, "case {case}: any hit to {tmax} with the closest at {t}");
+                    }
+                    assert!(inst.occluded(&loaded.bvh, o, d, 0.0, g.t * 1.001).is_some(), "case {case}");
+                    assert!(inst.occluded(&loaded.bvh, o, d, 0.0, (t * 0.999) as f32).is_none() || margin < 1e-5, "case {case}");
+                }
+                (Some(g), None) => {
+                    let [a, b, c] = edgepoint_worker::ray_oracle::world_triangle(&meshes, &tf, 0, g.triangle);
+                    assert!(barycentric_margin(g.position.as_dvec3(), a, b, c).abs() < 1e-5, "case {case}: a hit brute force misses");
+                    grazing += 1;
+                }
+                (None, Some((_, _, _, margin))) => {
+                    assert!(margin < 1e-5, "case {case}: a miss where brute force hits {margin} inside");
+                    grazing += 1;
+                }
+            }
+        }
+    }
+    assert!(hits > rays / 5, "{hits} of {rays} rays hit");
+    assert!(grazing * 500 <= rays, "{grazing} of {rays} rays graze an edge");
+}
+
+/// The welded dragon (871,306 triangles), on the bench's three kinds of rays (a camera's
+/// primary rays, shadow rays from their hits, random rays from inside the box): closest
+/// hit and any hit against brute force.
+#[test]
+fn dragon_matches_brute_force() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/dragon/dragon_vrip.ply");
+    if !path.exists() {
+        eprintln!("skipping: {} not found", path.display());
+        return;
+    }
+    let s = edgepoint_scene::load::load_path(&path, &NoProgress).expect("dragon loads");
+    let dragon = s.objects.iter().max_by_key(|o| o.mesh.triangles.len()).unwrap();
+    let mesh = dragon.mesh.clone();
+    let tf = vec![dragon.transform];
+    let bvh = edgepoint_worker::SceneBvh::build(&[mesh.as_ref()], &NoProgress);
+    let inst = edgepoint_worker::Instances::new(&bvh, &tf);
+    let (lo, hi) = edgepoint_scene::geometry::transformed_box(&tf[0], mesh.bounds);
+    let c = (lo + hi) * 0.5;
+    let eye = c + Vec3::new(0.0, 0.0, 0.25);
+    let light = c + Vec3::new(0.2, 0.3, 0.2);
+    let meshes = [mesh.as_ref()];
+    let mut rng = Lcg(5);
+    let mut rays = Vec::new();
+    for _ in 0..24 {
+        let target = c + (hi - lo) * 0.4 * rng.v(1.0);
+        rays.push((eye, (target - eye).normalize()));
+        let o = lo + (hi - lo) * Vec3::new(rng.f(), rng.f(), rng.f());
+        rays.push((o, rng.v(1.0).normalize_or(Vec3::Y)));
+    }
+    use rayon::prelude::*;
+    let results: Vec<_> = rays.par_iter().map(|&(o, d)| (o, d, edgepoint_worker::ray_oracle::closest(&meshes, &tf, o, d, 0.0, f64::INFINITY))).collect();
+    let mut hits = 0;
+    for (o, d, want) in results {
+        let got = inst.closest_hit(&bvh, o, d, 0.0, f32::INFINITY);
+        match (got, want) {
+            (None, None) => {}
+            (Some(g), Some((_, wt, t, margin))) => {
+                hits += 1;
+                assert!((g.t as f64 - t).abs() <= 1e-5 * t, "t {} vs {t}", g.t);
+                assert!(g.triangle == wt || margin < 1e-5, "triangle {} vs {wt}", g.triangle);
+                // A shadow ray from the hit to the light, as the bench makes them.
+                let n = if g.normal.dot(d) < 0.0 { g.normal } else { -g.normal };
+                let so = g.position + n * 1e-5;
+                let to = light - so;
+                let dist = to.length();
+                let sd = to / dist;
+                let blocked = inst.occluded(&bvh, so, sd, 0.0, dist).is_some();
+                let brute = edgepoint_worker::ray_oracle::closest(&meshes, &tf, so, sd, 0.0, dist as f64);
+                assert!(blocked == brute.is_some() || brute.is_some_and(|b| b.3 < 1e-5), "shadow ray from {so}: {blocked} vs {brute:?}");
+            }
+            (g, w) => {
+                let margin = match (g, w) {
+                    (Some(g), None) => {
+                        let [a, b, c] = edgepoint_worker::ray_oracle::world_triangle(&meshes, &tf, 0, g.triangle);
+                        barycentric_margin(g.position.as_dvec3(), a, b, c)
+                    }
+                    (None, Some(w)) => w.3,
+                    _ => unreachable!(),
+                };
+                assert!(margin.abs() < 1e-5, "ray {o} {d}: bvh {g:?} brute {w:?}");
+            }
+        }
+    }
+    assert!(hits >= 20, "{hits} of {} rays hit the dragon", rays.len());
 }
