@@ -6,7 +6,7 @@
 //! lobes see area lights only that way ([`crate::bsdf_rays`]); point lights reach every
 //! non-delta lobe. Transmission receives no direct light (a light behind a glass surface is
 //! behind the object the surface belongs to).
-use super::hit::{unit_direction, Surface};
+use super::hit::{primary, Surface};
 use super::lights::{add_direct_light, LightQuery};
 use super::{finish, RayRequest, Shaded};
 use crate::bsdf_rays::area_light_via_bsdf;
@@ -39,15 +39,12 @@ impl Default for DirectParams {
 pub(crate) const BSDF_STREAM: u64 = 0x6273_6466_5f72_6179;
 
 pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &DirectParams, seed: u64, r: &RayRequest) -> Shaded {
-    let Some(d) = unit_direction(r.origin, r.direction) else {
-        return finish(r.id, None, Vec3::NAN, Vec::new());
+    let s = match primary(scene, inst, r) {
+        Ok(s) => s,
+        Err(done) => return done,
     };
-    let Some(h) = inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) else {
-        return finish(r.id, None, scene.scene.background, Vec::new());
-    };
-    let s = Surface::new(scene, inst, h, d);
     let mut triples = Vec::new();
-    let mut rgb = if s.front { s.material.emission } else { Vec3::ZERO };
+    let mut rgb = s.emitted();
     let mut rng = Rng::new(seed, r.id);
     let mut bsdf_rng = Rng::new(seed ^ BSDF_STREAM, r.id);
     add_lit(scene, inst, &s, p, &mut rng, &mut bsdf_rng, Some(&mut triples), &mut rgb);

@@ -12,7 +12,7 @@
 //! into a new record from `cache_rays` hemisphere paths when no record is valid there.
 //! Only first hits use the cache (the paper's shader caches what the camera sees; deeper
 //! vertices are path-traced).
-use super::hit::{unit_direction, Surface};
+use super::hit::{primary, Surface};
 use super::irradiance_cache::{gather, CacheSettings, Ticket};
 use super::lights::{add_direct_light, LightQuery};
 use super::{finish, RayRequest, Shaded};
@@ -58,18 +58,15 @@ struct Ctx<'a> {
 }
 
 pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GiParams, cache: Option<Ticket>, seed: u64, r: &RayRequest) -> Shaded {
-    let Some(d) = unit_direction(r.origin, r.direction) else {
-        return finish(r.id, None, Vec3::NAN, Vec::new());
-    };
-    let Some(h) = inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) else {
-        return finish(r.id, None, scene.scene.background, Vec::new());
+    let s = match primary(scene, inst, r) {
+        Ok(s) => s,
+        Err(done) => return done,
     };
     let ctx = Ctx { scene, inst, p };
-    let s = Surface::new(scene, inst, h, d);
     let mut triples = Vec::new();
     let mut light_rng = Rng::new(seed, r.id);
     let mut path_rng = Rng::new(seed ^ PATH_STREAM, r.id);
-    let mut rgb = if s.front { s.material.emission } else { Vec3::ZERO };
+    let mut rgb = s.emitted();
     let info = s.info();
     rgb += scattered(&ctx, s, 0, cache, Some(&mut triples), &mut light_rng, &mut path_rng);
     finish(r.id, Some(info), rgb, triples)

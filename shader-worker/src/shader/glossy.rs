@@ -8,7 +8,7 @@
 //! light fixtures' own emission: the BSDF samples toward the area lights at the surface
 //! already count it, weighted against the light samples.
 use super::direct::{add_lit, DirectParams, BSDF_STREAM};
-use super::hit::{unit_direction, Surface};
+use super::hit::{primary, Surface};
 use super::{finish, RayRequest, Shaded};
 use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
@@ -38,15 +38,12 @@ struct Streams {
 }
 
 pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GlossyParams, seed: u64, r: &RayRequest) -> Shaded {
-    let Some(d) = unit_direction(r.origin, r.direction) else {
-        return finish(r.id, None, Vec3::NAN, Vec::new());
+    let s = match primary(scene, inst, r) {
+        Ok(s) => s,
+        Err(done) => return done,
     };
-    let Some(h) = inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) else {
-        return finish(r.id, None, scene.scene.background, Vec::new());
-    };
-    let s = Surface::new(scene, inst, h, d);
     let mut triples = Vec::new();
-    let mut rgb = if s.front { s.material.emission } else { Vec3::ZERO };
+    let mut rgb = s.emitted();
     let mut rng = Streams { light: Rng::new(seed, r.id), bsdf: Rng::new(seed ^ BSDF_STREAM, r.id), reflect: Rng::new(seed ^ REFLECT_STREAM, r.id) };
     add_lit(scene, inst, &s, &p.direct, &mut rng.light, &mut rng.bsdf, Some(&mut triples), &mut rgb);
     rgb += reflected(scene, inst, p, &s, p.rays, p.max_depth, &mut rng);

@@ -1,7 +1,7 @@
 //! A ray's closest hit made ready to shade: the shading point of its material, the face
 //! normal on the viewer's side, and the origin secondary rays leave from. Every shader and
 //! every bounce starts here.
-use super::HitInfo;
+use super::{finish, HitInfo, RayRequest, Shaded};
 use crate::bvh::{Hit, Instances};
 use crate::loaded::LoadedScene;
 use crate::surface::ShadingPoint;
@@ -41,6 +41,16 @@ impl<'a> Surface<'a> {
         }
     }
 
+    /// The material's emission toward the viewer (light fixtures are seen from the front).
+    #[inline]
+    pub fn emitted(&self) -> Vec3 {
+        if self.front {
+            self.material.emission
+        } else {
+            Vec3::ZERO
+        }
+    }
+
     /// What the renderer learns of a primary hit.
     pub fn info(&self) -> HitInfo {
         let h = &self.h;
@@ -52,7 +62,19 @@ impl<'a> Surface<'a> {
 /// The unit direction of a request's ray, or `None` for a ray that cannot be traced (zero,
 /// infinite or NaN direction or origin): such a request is answered black and counted.
 #[inline]
-pub(crate) fn unit_direction(origin: Vec3, direction: Vec3) -> Option<Vec3> {
+fn unit_direction(origin: Vec3, direction: Vec3) -> Option<Vec3> {
     let len = direction.length();
     (len.is_finite() && len > 0.0 && origin.is_finite()).then(|| direction / len)
+}
+
+/// A request's first hit, or its finished sample when there is none: a ray that cannot be
+/// traced is answered black and counted, a miss gets the background. Every shader starts here.
+pub(crate) fn primary<'a>(scene: &'a LoadedScene, inst: &Instances, r: &RayRequest) -> Result<Surface<'a>, Shaded> {
+    let Some(d) = unit_direction(r.origin, r.direction) else {
+        return Err(finish(r.id, None, Vec3::NAN, Vec::new()));
+    };
+    match inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) {
+        Some(h) => Ok(Surface::new(scene, inst, h, d)),
+        None => Err(finish(r.id, None, scene.scene.background, Vec::new())),
+    }
 }
