@@ -106,7 +106,7 @@ pub fn run(a: MaterialsArgs) -> Result<()> {
     let loaded = LoadedScene::build(scene, "bench".into(), &edgepoint_scene::NoProgress);
     let inst = loaded.instances(&loaded.default_transforms());
     let spec = ShaderSpec::parse("direct", &HashMap::new()).map_err(|e| anyhow::anyhow!(e))?;
-    let ShaderSpec::Direct(params) = spec.clone();
+    let ShaderSpec::Direct(params) = spec.clone() else { unreachable!("parsed as direct") };
     let mut gen = crate::requests::RayGen::new(&camera, 7);
     let prepared: Vec<Vec<RayRequest>> = (0..64).map(|_| gen.batch(a.batch)).collect();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;

@@ -29,22 +29,46 @@ pub struct ShaderInfo {
 /// The shader an empty `start.shader` means.
 pub const DEFAULT_SHADER: &str = "direct";
 
+/// `shadow_rays` and `ambient` as `direct` has them (shared by `direct` and `glossy`).
+const SHADOW_RAYS: ShaderParam = ShaderParam {
+    name: "shadow_rays",
+    min: 1.0,
+    max: 4096.0,
+    default: 16.0,
+    integer: true,
+    help: "shadow rays per area light per sample (stratified)",
+};
+const AMBIENT: ShaderParam = ShaderParam { name: "ambient", min: 0.0, max: 100.0, default: 1.0, integer: false, help: "scale of the scene's ambient term (built-ins: their own; a bare model staged by the loader: 0.03 grey; a scene file that brings its own lights or camera: none, so 0 whatever the scale)" };
+
 /// Every shader.
-pub const SHADERS: &[ShaderInfo] = &[ShaderInfo {
-    name: "direct",
-    help: "point and polygonal area lights with shadow rays, Lambertian, ambient (paper 000)",
-    params: &[
-        ShaderParam {
-            name: "shadow_rays",
-            min: 1.0,
-            max: 4096.0,
-            default: 16.0,
-            integer: true,
-            help: "shadow rays per area light per sample (stratified)",
-        },
-        ShaderParam { name: "ambient", min: 0.0, max: 100.0, default: 1.0, integer: false, help: "scale of the scene's ambient term (built-ins: their own; a bare model staged by the loader: 0.03 grey; a scene file that brings its own lights or camera: none, so 0 whatever the scale)" },
-    ],
-}];
+pub const SHADERS: &[ShaderInfo] = &[
+    ShaderInfo {
+        name: "direct",
+        help: "point and polygonal area lights with shadow rays, Lambertian, ambient (paper 000)",
+        params: &[SHADOW_RAYS, AMBIENT],
+    },
+    ShaderInfo {
+        name: "glossy",
+        help: "direct light and ambient as `direct`, plus glossy and mirror reflection (and refraction) traced by sampling the non-diffuse part of the BSDF (paper 000 §7's second shader)",
+        params: &[
+            SHADOW_RAYS,
+            AMBIENT,
+            ShaderParam { name: "rays", min: 1.0, max: 256.0, default: 4.0, integer: true, help: "BSDF-sampled reflection rays K at the first hit (one per deeper hit)" },
+            ShaderParam { name: "max_depth", min: 1.0, max: 16.0, default: 3.0, integer: true, help: "reflection bounces followed (1: reflections show direct light and ambient only)" },
+        ],
+    },
+    ShaderInfo {
+        name: "gi",
+        help: "path tracing: next-event estimation with multiple importance sampling over lights and BSDF, Russian roulette; the diffuse indirect term of Lambertian first hits from a per-worker irradiance cache (Ward records with gradients, paper 000 §7)",
+        params: &[
+            ShaderParam { name: "shadow_rays", min: 1.0, max: 4096.0, default: 4.0, integer: true, help: "light samples per area light at the first hit (one at deeper hits)" },
+            ShaderParam { name: "max_depth", min: 1.0, max: 64.0, default: 6.0, integer: true, help: "path vertices shaded (1: direct light only); Russian roulette from the fourth" },
+            ShaderParam { name: "cache", min: 0.0, max: 1.0, default: 1.0, integer: true, help: "1: irradiance cache for the diffuse indirect term of Lambertian first hits; 0: path-trace it" },
+            ShaderParam { name: "cache_error", min: 0.02, max: 1.0, default: 0.15, integer: false, help: "Ward's accuracy a: a record serves points of weight above 1/a (smaller: more records, less blur)" },
+            ShaderParam { name: "cache_rays", min: 16.0, max: 4096.0, default: 256.0, integer: true, help: "hemisphere rays per irradiance record (M x N strata, N ~ pi M)" },
+        ],
+    },
+];
 
 /// The shader called `name` (`""` is [`DEFAULT_SHADER`]).
 pub fn shader(name: &str) -> Option<&'static ShaderInfo> {
@@ -120,7 +144,13 @@ mod tests {
             let e = resolve("direct", &given(&[bad])).unwrap_err();
             assert!(e.contains(bad.0) && e.contains("must be"), "{e}");
         }
-        assert!(resolve("glossy", &HashMap::new()).unwrap_err().contains("shaders: direct"));
+        assert!(resolve("phong", &HashMap::new()).unwrap_err().contains("shaders: direct, glossy, gi"));
+        let g = resolve("gi", &given(&[("max_depth", 3.0)])).unwrap();
+        assert_eq!((g["max_depth"], g["cache"], g["shadow_rays"]), (3.0, 1.0, 4.0));
+        for bad in [("cache", 2.0), ("cache_error", 0.0), ("max_depth", 0.0), ("cache_rays", 1e9)] {
+            assert!(resolve("gi", &given(&[bad])).unwrap_err().contains(bad.0));
+        }
+        assert!(resolve("glossy", &given(&[("rays", 0.5)])).is_err());
         // Every row is consistent: the default is valid.
         for s in SHADERS {
             for p in s.params {

@@ -99,3 +99,11 @@ element face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0
     assert!((c.eye - s.camera.eye).length() < 1e-4 * o.radius, "{} vs {}", c.eye, s.camera.eye);
     check_orbit(&s, false, &["tet"]);
 }
+
+#[test]
+fn glossy_bunny_orbits_over_its_floor_and_outside_the_bunny() {
+    let s = data::load_builtin("glossy-bunny", None, &edgepoint_scene::NoProgress)
+        .unwrap_or_else(|e| panic!("glossy-bunny needs the shared bunny: {e}"));
+    s.validate().unwrap();
+    check_orbit(&s, false, &["bunny"]);
+}

@@ -520,8 +520,12 @@ mod tests {
         assert!(e.message().contains("'bogus'") && e.message().contains("shadow_rays") && e.message().contains("ambient"), "{}", e.message());
         let params = HashMap::from([("shadow_rays".to_string(), 0.0)]);
         assert!(check_start(&pb::Start { shader_params: params, ..start() }).unwrap_err().message().contains("shadow_rays"));
-        let e = check_start(&pb::Start { shader: "glossy".into(), ..start() }).unwrap_err();
-        assert!(e.message().contains("unknown shader 'glossy'"), "{}", e.message());
+        let e = check_start(&pb::Start { shader: "phong".into(), ..start() }).unwrap_err();
+        assert!(e.message().contains("unknown shader 'phong'") && e.message().contains("direct, glossy, gi"), "{}", e.message());
+        // Issue 14: the new shaders' parameters are checked too.
+        assert!(check_start(&pb::Start { shader: "gi".into(), ..start() }).is_ok());
+        let params = HashMap::from([("max_depth".to_string(), 0.0)]);
+        assert!(check_start(&pb::Start { shader: "glossy".into(), shader_params: params, ..start() }).unwrap_err().message().contains("max_depth"));
     }
 
     fn service(cfg: ServiceConfig) -> RendererService {

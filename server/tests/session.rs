@@ -153,6 +153,16 @@ async fn bad_starts_fail_alone_while_another_session_runs() {
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert!(e.message().contains("no-such-scene"), "{}", e.message());
 
+    // A shader parameter out of its range is refused at start, naming it (issue 14).
+    let mut bad_gi = start_msg(cornell(), 64, 48);
+    if let Some(In::Start(st)) = &mut bad_gi.msg {
+        st.shader = "gi".into();
+        st.shader_params = [("cache_error".to_string(), 5.0)].into();
+    }
+    let e = open(&addr, bad_gi).await.err().expect("cache_error 5 refused");
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("cache_error"), "{}", e.message());
+
     let cam_first = pb::ViewerMsg { msg: Some(In::Camera(pb::Camera::default())) };
     let e = open(&addr, cam_first).await.err().unwrap();
     assert_eq!(e.code(), tonic::Code::InvalidArgument);

@@ -5,7 +5,7 @@
 use crate::bvh::Instances;
 use crate::loaded::{LoadedScene, PreparedLight};
 use crate::rng::Rng;
-use crate::shade::{merge, push_unique, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput};
+use crate::shader::{merge, push_unique, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;

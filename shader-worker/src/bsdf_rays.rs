@@ -74,6 +74,16 @@ fn hit_area_light(a: &AreaLight, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> 
 /// and cosine). The shadow ray stops short of the light as the light samples' do, so a
 /// luminaire object lying on the light does not block it.
 fn visible_light<'a>(scene: &'a LoadedScene, inst: &Instances, origin: Vec3, dir: Vec3) -> Option<(&'a AreaLight, f32, f32)> {
+    let (a, t, cos_l) = nearest_area_light(scene, origin, dir)?;
+    if inst.occluded(&scene.bvh, origin, dir, 0.0, t * (1.0 - 1e-4)).is_some() {
+        return None;
+    }
+    Some((a, t * t, cos_l))
+}
+
+/// The nearest area light's emitting side along a ray, occlusion not tested: (light,
+/// distance, cosine at the light).
+pub(crate) fn nearest_area_light(scene: &LoadedScene, origin: Vec3, dir: Vec3) -> Option<(&AreaLight, f32, f32)> {
     let mut best: Option<(&AreaLight, f32, f32)> = None;
     for l in &scene.lights {
         if let PreparedLight::Area(a) = l {
@@ -84,11 +94,7 @@ fn visible_light<'a>(scene: &'a LoadedScene, inst: &Instances, origin: Vec3, dir
             }
         }
     }
-    let (a, t, cos_l) = best?;
-    if inst.occluded(&scene.bvh, origin, dir, 0.0, t * (1.0 - 1e-4)).is_some() {
-        return None;
-    }
-    Some((a, t * t, cos_l))
+    best
 }
 
 /// Radiance reaching the viewer from area lights through BSDF-sampled directions.

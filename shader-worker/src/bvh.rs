@@ -93,6 +93,8 @@ pub struct Instances {
     to_object: Vec<Affine3A>,
     /// Inverse-transpose of each object's linear part: object normals to world normals.
     normal_to_world: Vec<Mat3A>,
+    /// The object-to-world transforms this top level was built for.
+    transforms: Vec<Affine3A>,
 }
 
 /// A closest hit, in world space.
@@ -129,6 +131,7 @@ impl Instances {
             slot_object,
             to_object: transforms.iter().map(|t| t.inverse()).collect(),
             normal_to_world: transforms.iter().map(|t| t.matrix3.inverse().transpose()).collect(),
+            transforms: transforms.to_vec(),
         }
     }
 
@@ -144,6 +147,12 @@ impl Instances {
             let local = PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin);
             f(obj, &bvh.objects[obj as usize], &local)
         })
+    }
+
+    /// The object-to-world transforms (one per object) this top level was built for.
+    #[inline]
+    pub fn transforms(&self) -> &[Affine3A] {
+        &self.transforms
     }
 
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).

@@ -4,7 +4,7 @@
 //! and report the same light–blocker–receiver triples.
 use crate::baseline::shade_direct_before_materials;
 use crate::loaded::LoadedScene;
-use crate::shade::{shade_batch, DirectParams, RayRequest, ShaderSpec};
+use crate::shader::{shade_batch, DirectParams, RayRequest, ShaderSpec};
 use edgepoint_scene::NoProgress;
 use std::collections::HashMap;
 
@@ -17,7 +17,7 @@ fn builtin_scenes_shade_exactly_as_before_materials() {
         let inst = loaded.instances(&loaded.default_transforms());
         for params in [HashMap::new(), HashMap::from([("shadow_rays".to_string(), 5.0), ("ambient".to_string(), 0.3)])] {
             let spec = ShaderSpec::parse("direct", &params).unwrap();
-            let ShaderSpec::Direct(dp) = spec.clone();
+            let ShaderSpec::Direct(dp) = spec.clone() else { unreachable!("parsed as direct") };
             let reqs: Vec<RayRequest> = (0..48 * 48)
                 .map(|i| {
                     let (o, d) = cam.ray((i % 48) as f32 + 0.37, (i / 48) as f32 + 0.61);

@@ -1,5 +1,5 @@
 //! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
-//! ray requests ([`shade`]) and serves them over gRPC ([`service`]), with its command line in
+//! ray requests ([`shader`]: `direct`, `glossy`, `gi`) and serves them over gRPC ([`service`]), with its command line in
 //! [`cli`] and its Prometheus metrics in [`metrics`].
 pub mod baseline;
 pub mod bsdf_rays;
@@ -12,11 +12,11 @@ pub mod metrics;
 pub mod ray_oracle;
 mod rng;
 pub mod service;
-pub mod shade;
+pub mod shader;
 pub mod surface;
 pub mod triples;
 
 pub use bvh::{BvhShape, Hit, Instances, SceneBvh};
 pub use loaded::LoadedScene;
 pub use triples::sample_triples;
-pub use shade::{shade_batch, DirectParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};
+pub use shader::{shade_batch, DirectParams, GiParams, GlossyParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

@@ -1,6 +1,7 @@
 //! A scene ready to shade: the scene, its per-object BVHs and its lights prepared for
 //! sampling. Built once per scene hash and shared by every stream that shades it.
 use crate::bvh::{Instances, SceneBvh};
+use crate::shader::irradiance_cache::IrradianceCache;
 use edgepoint_scene::{Light, Progress, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
@@ -85,6 +86,8 @@ pub struct LoadedScene {
     pub epsilon: f32,
     /// Milliseconds spent building the BVHs.
     pub build_ms: f64,
+    /// The `gi` shader's irradiance records for this scene on this worker.
+    pub irradiance: IrradianceCache,
 }
 
 impl LoadedScene {
@@ -96,7 +99,8 @@ impl LoadedScene {
         let (lo, hi) = scene.bounds();
         let epsilon = ((hi - lo).length() * 1e-5).max(1e-6);
         let lights = scene.lights.iter().map(PreparedLight::new).collect();
-        LoadedScene { scene: Arc::new(scene), bvh, hash, lights, epsilon, build_ms: t.elapsed().as_secs_f64() * 1e3 }
+        let irradiance = IrradianceCache::new((lo, hi));
+        LoadedScene { scene: Arc::new(scene), bvh, hash, lights, epsilon, build_ms: t.elapsed().as_secs_f64() * 1e3, irradiance }
     }
 
     /// The top level for one epoch's object transforms (one per object).

@@ -12,7 +12,7 @@
 //! re-issues whatever it still had queued here to other workers and nothing is lost.
 use crate::loaded::LoadedScene;
 use crate::metrics::WorkerMetrics;
-use crate::shade::{shade_batch, RayRequest, ShaderSpec, SHADERS};
+use crate::shader::{shade_batch, RayRequest, ShaderSpec, SHADERS};
 use crate::Instances;
 use edgepoint_proto::shader_worker_server::ShaderWorker;
 use edgepoint_proto::{self as pb, shade_in, shade_out};

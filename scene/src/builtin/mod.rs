@@ -1,8 +1,8 @@
 //! Built-in scenes: the Cornell box, and scenes after paper 000's (§7.1, Figures 7, 9, 12,
-//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`; and `materials`, the demo of the
-//! scattering models.
+//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`; `materials`, the demo of the
+//! scattering models; and `glossy-bunny`, the `glossy` shader's scene.
 //!
-//! Most are procedural. `grid-dragon` is built around the shared Stanford dragon, which is
+//! Most are procedural. `grid-dragon` (and `glossy-bunny`) is built around the shared Stanford dragon, which is
 //! data, not code: such a built-in names its data files ([`data_files`]) and is built by
 //! [`load_with_files`] from their bytes. On the wire it travels as a `SceneFiles` source
 //! whose first file is a small description (`grid-dragon.builtin`, see [`description`])
@@ -11,6 +11,7 @@
 //! [`crate::data`].
 mod chains;
 mod cornell;
+mod glossy_bunny;
 mod grid_dragon;
 mod materials;
 mod rooms;
@@ -30,6 +31,7 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("torus-capsule", "a torus resting on a capsule under a square area light: contact hardening (paper Fig. 9)"),
     ("grid-dragon", "a grid casting a shadow pattern on the Stanford dragon, point light (paper Fig. 13; needs dragon/dragon_vrip.ply)"),
     ("rooms", "six furnished rooms with doorways, one ceiling area light each (paper Fig. 12)"),
+    ("glossy-bunny", "the Stanford bunny in rough gold on polished plastic before a mirror, area and point light: for the glossy shader (needs bunny/bun_zipper.ply)"),
     ("materials", "a sphere of each material (Lambert, plastic, metal, glass; smooth and rough) under an area and a point light"),
 ];
 
@@ -37,6 +39,7 @@ pub const BUILTINS: &[(&str, &str)] = &[
 pub fn data_files(name: &str) -> &'static [&'static str] {
     match name {
         "grid-dragon" => &[grid_dragon::DRAGON],
+        "glossy-bunny" => &[glossy_bunny::BUNNY],
         _ => &[],
     }
 }
@@ -83,6 +86,10 @@ pub fn load_with_files(name: &str, files: &[NamedBytes], progress: &dyn Progress
         "grid-dragon" => {
             let dragon = crate::load::mesh_from_file(find(grid_dragon::DRAGON)?, progress)?;
             Ok(grid_dragon::grid_dragon(dragon))
+        }
+        "glossy-bunny" => {
+            let bunny = crate::load::mesh_from_file(find(glossy_bunny::BUNNY)?, progress)?;
+            Ok(glossy_bunny::glossy_bunny(bunny))
         }
         _ => Err(SceneError::file(name, unknown(name))),
     }

@@ -1,0 +1,66 @@
+//! `direct` (paper 000 §7: "direct illumination with ambient"): point lights with one
+//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows), the
+//! material's BSDF ([`crate::surface`]: shading normals, textures, sidedness), emission of
+//! light fixtures seen from the front, and an ambient term times the diffuse albedo. Rough
+//! lobes also sample the BSDF toward area lights (multiple importance sampling) and delta
+//! lobes see area lights only that way ([`crate::bsdf_rays`]); point lights reach every
+//! non-delta lobe. Transmission receives no direct light (a light behind a glass surface is
+//! behind the object the surface belongs to).
+use super::hit::{primary, Surface};
+use super::lights::{add_direct_light, LightQuery};
+use super::{finish, RayRequest, Shaded};
+use crate::bsdf_rays::area_light_via_bsdf;
+use crate::bvh::Instances;
+use crate::loaded::LoadedScene;
+use crate::rng::Rng;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// Parameters of the `direct` shader (ranges and defaults: the shared table).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectParams {
+    /// Shadow rays per area light per sample (`shadow_rays`).
+    pub shadow_rays: u32,
+    /// Scale of the scene's ambient term (`ambient`).
+    pub ambient: f32,
+}
+
+impl Default for DirectParams {
+    fn default() -> Self {
+        match super::ShaderSpec::parse("direct", &HashMap::new()) {
+            Ok(super::ShaderSpec::Direct(p)) => p,
+            other => unreachable!("the table's defaults are valid (tested): {other:?}"),
+        }
+    }
+}
+
+/// Seed offset of the BSDF samples' random stream: separate from the light samples' stream,
+/// so the light samples (and the triples they find) do not depend on the material.
+pub(crate) const BSDF_STREAM: u64 = 0x6273_6466_5f72_6179;
+
+pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &DirectParams, seed: u64, r: &RayRequest) -> Shaded {
+    let s = match primary(scene, inst, r) {
+        Ok(s) => s,
+        Err(done) => return done,
+    };
+    let mut triples = Vec::new();
+    let mut rgb = s.emitted();
+    let mut rng = Rng::new(seed, r.id);
+    let mut bsdf_rng = Rng::new(seed ^ BSDF_STREAM, r.id);
+    add_lit(scene, inst, &s, p, &mut rng, &mut bsdf_rng, Some(&mut triples), &mut rgb);
+    finish(r.id, Some(s.info()), rgb, triples)
+}
+
+/// What `direct` adds at a surface: sampled direct light, area lights through the BSDF
+/// (delta and rough lobes), and the ambient term. `glossy` adds the same at every bounce.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn add_lit(scene: &LoadedScene, inst: &Instances, s: &Surface, p: &DirectParams, rng: &mut Rng, bsdf_rng: &mut Rng, triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: p.shadow_rays, bsdf_per_light_sample: 1.0 };
+    add_direct_light(scene, inst, &q, rng, triples, rgb);
+    if s.sp.scatters {
+        if s.sp.bsdf_has_delta() || s.sp.is_glossy() {
+            *rgb += area_light_via_bsdf(scene, inst, &s.sp, s.origin, s.n, p.shadow_rays, bsdf_rng);
+        }
+        *rgb += s.sp.diffuse_albedo() * scene.scene.ambient * p.ambient;
+    }
+}

@@ -1,0 +1,428 @@
+//! The irradiance cache of the `gi` shader (paper 000 §7: "a dynamic variant of irradiance
+//! caching [Ward et al. 1988] modified for interactive use"), one per loaded scene on each
+//! worker.
+//!
+//! A record holds the irradiance E of the diffuse indirect term at a point (everything that
+//! arrives except the lights' own emission, which next-event estimation handles), gathered
+//! from M × N stratified cosine-weighted hemisphere rays, with Ward & Heckbert's (1992)
+//! rotation and translation gradients and the harmonic mean distance R of the hits. A point
+//! p with normal n is served by the records of Ward's weight
+//! w = 1 / (|p − pᵢ| / Rᵢ + √(1 − n·nᵢ)) above 1/a, each extrapolated with its gradients,
+//! Eᵢ + (nᵢ × n)·∇r + (p − pᵢ)·∇t, and averaged by weight; records "in front" of p are
+//! skipped (Ward's test). R is clamped to [Rmax / 16, Rmax] with Rmax = cell / a, so a
+//! record serves no farther than one grid cell and a lookup visits 27 cells; and to
+//! E / |∇t E| (Křivánek et al. 2006's gradient limit), so extrapolation stays positive.
+//!
+//! Bounded memory: at most [`MAX_RECORDS`] records in a ring (the oldest is dropped), a
+//! number of this module, never one an input gives.
+//!
+//! Validity: records are valid while the scene is unchanged. When a batch's transforms
+//! differ from the ones the cache was built with, [`IrradianceCache::sync`] drops every
+//! record on a moved object and every record whose hemisphere sees a moved object's old or
+//! new world bounds — any corner of the box above the record's tangent plane, ignoring
+//! occlusion (conservative: a record the object could have shadowed or lit is never kept).
+//! Other records stay. Changing the shader's cache parameters empties the cache. A batch
+//! that started under older transforms neither reads nor writes records (it computes its
+//! irradiance without storing it), so no record mixes two object placements.
+use crate::rng::Rng;
+use edgepoint_scene::geometry::{box_corners, transformed_box};
+use edgepoint_scene::material::Frame;
+use edgepoint_scene::Scene;
+use glam::{Affine3A, Vec3};
+use std::collections::HashMap;
+use std::f32::consts::{PI, TAU};
+use std::sync::RwLock;
+
+/// The most records a cache holds (each about 130 bytes with its grid entry: ~8.5 MB).
+pub const MAX_RECORDS: usize = 1 << 16;
+/// Grid cells across the scene's bounding-box diagonal.
+const CELLS_ACROSS: f32 = 32.0;
+/// Rmin = Rmax / this.
+const R_RANGE: f32 = 16.0;
+
+/// What records depend on besides the scene: the shader parameters they were made with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CacheSettings {
+    /// Ward's accuracy a.
+    pub error: f32,
+    /// Hemisphere rays per record.
+    pub rays: u32,
+    /// The path depth behind each hemisphere ray.
+    pub max_depth: u32,
+}
+
+/// A batch's permission to use the cache: valid while the cache is at `version`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ticket {
+    version: u64,
+    settings: CacheSettings,
+}
+
+/// One irradiance record. Gradients are per colour channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Record {
+    pub p: Vec3,
+    pub n: Vec3,
+    pub e: Vec3,
+    /// Harmonic mean distance, clamped.
+    pub r: f32,
+    pub grad_r: [Vec3; 3],
+    pub grad_t: [Vec3; 3],
+    /// The object the record lies on.
+    pub object: u32,
+}
+
+impl Record {
+    /// The record's irradiance extrapolated to (p, n) with its gradients, never negative.
+    #[inline]
+    pub fn extrapolate(&self, p: Vec3, n: Vec3) -> Vec3 {
+        let rot = self.n.cross(n);
+        let d = p - self.p;
+        let c = |i: usize| self.e[i] + rot.dot(self.grad_r[i]) + d.dot(self.grad_t[i]);
+        Vec3::new(c(0), c(1), c(2)).max(Vec3::ZERO)
+    }
+
+    /// Ward's weight of this record at (p, n) (capped, so a lookup at the record itself is finite).
+    #[inline]
+    pub fn weight(&self, p: Vec3, n: Vec3) -> f32 {
+        let den = (p - self.p).length() / self.r + (1.0 - n.dot(self.n)).max(0.0).sqrt();
+        1.0 / den.max(1e-6)
+    }
+}
+
+/// A hemisphere gathered for a record (before R's clamping).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gathered {
+    pub e: Vec3,
+    /// Harmonic mean hit distance (infinite when every ray escaped).
+    pub r: f32,
+    pub grad_r: [Vec3; 3],
+    pub grad_t: [Vec3; 3],
+}
+
+/// Strata (M, N) for `rays` hemisphere rays: N ≈ π M, as Ward and Heckbert advise.
+pub fn strata(rays: u32) -> (usize, usize) {
+    let m = ((rays as f32 / PI).sqrt().round() as usize).max(2);
+    (m, (rays as usize / m).max(3))
+}
+
+/// Gathers the hemisphere around `frame.n` with M × N stratified cosine-weighted rays (θ_j =
+/// asin √((j + ξ)/M), φ_k = 2π (k + ξ')/N); `trace(direction)` gives the radiance arriving
+/// from that direction and the distance to what it hit (infinite for an escaped ray).
+/// Gradients: Ward & Heckbert 1992, in the form of Křivánek et al.'s course notes:
+/// ∇r E = π/(MN) Σ_k v_k Σ_j tan θ_j L_jk (the sign that goes with Eᵢ + (nᵢ × n)·∇r, as
+/// the half-plane test derives: the published −tan θ pairs with n × nᵢ), and
+/// ∇t E = Σ_k [ u_k 2π/N Σ_{j≥1} sin θ_j− cos² θ_j− / min(R_jk, R_j−1,k) (L_jk − L_j−1,k)
+///            + v_k− Σ_j (sin θ_j+ − sin θ_j−) / min(R_jk, R_j,k−1) (L_jk − L_j,k−1) ],
+/// θ_j− = asin √(j/M), θ_j+ = asin √((j+1)/M), u_k the base-plane direction φ_k and v_k−
+/// the one at φ_k− + π/2 = 2πk/N + π/2.
+pub fn gather(frame: &Frame, rays: u32, rng: &mut Rng, mut trace: impl FnMut(Vec3) -> (Vec3, f32)) -> Gathered {
+    let (m, n) = strata(rays);
+    let mut l = vec![Vec3::ZERO; m * n];
+    let mut r = vec![0f32; m * n];
+    let mut sum = Vec3::ZERO;
+    let mut inv_r = 0.0f64;
+    let mut grad_r = [Vec3::ZERO; 3];
+    let tangent = |phi: f32| frame.to_world(Vec3::new(phi.cos(), phi.sin(), 0.0));
+    for k in 0..n {
+        for j in 0..m {
+            let sin2 = (j as f32 + rng.next_f32()) / m as f32;
+            let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).max(0.0).sqrt());
+            let phi = TAU * (k as f32 + rng.next_f32()) / n as f32;
+            let dir = frame.to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t));
+            let (li, ri) = trace(dir);
+            let (li, ri) = if li.is_finite() { (li, ri) } else { (Vec3::ZERO, ri) };
+            l[j * n + k] = li;
+            r[j * n + k] = ri;
+            sum += li;
+            if ri.is_finite() && ri > 0.0 {
+                inv_r += 1.0 / ri as f64;
+            }
+            // v_k for the rotation gradient: the base-plane direction a quarter turn on
+            // (∇r = ∫ L (n × ω) dω = ∫ L sin θ v dω).
+            let v = tangent(phi + PI / 2.0) * (sin_t / cos_t.max(1e-4));
+            for (c, g) in grad_r.iter_mut().enumerate() {
+                *g += v * li[c];
+            }
+        }
+    }
+    let scale = PI / (m * n) as f32;
+    let mut grad_t = [Vec3::ZERO; 3];
+    let idx = |j: usize, k: usize| j * n + k;
+    for k in 0..n {
+        let u = tangent(TAU * (k as f32 + 0.5) / n as f32) * (TAU / n as f32);
+        let v = tangent(TAU * k as f32 / n as f32 + PI / 2.0);
+        let km = (k + n - 1) % n;
+        for j in 0..m {
+            let s_minus = (j as f32 / m as f32).sqrt();
+            if j >= 1 {
+                let cos2 = 1.0 - j as f32 / m as f32;
+                let c = s_minus * cos2 / r[idx(j, k)].min(r[idx(j - 1, k)]);
+                let dl = l[idx(j, k)] - l[idx(j - 1, k)];
+                for (ch, g) in grad_t.iter_mut().enumerate() {
+                    *g += u * (c * dl[ch]);
+                }
+            }
+            let s_plus = ((j + 1) as f32 / m as f32).sqrt();
+            let c = (s_plus - s_minus) / r[idx(j, k)].min(r[idx(j, km)]);
+            let dl = l[idx(j, k)] - l[idx(j, km)];
+            for (ch, g) in grad_t.iter_mut().enumerate() {
+                *g += v * (c * dl[ch]);
+            }
+        }
+    }
+    let r_harm = if inv_r > 0.0 { ((m * n) as f64 / inv_r) as f32 } else { f32::INFINITY };
+    Gathered { e: sum * scale, r: r_harm, grad_r: grad_r.map(|g| g * scale), grad_t }
+}
+
+struct State {
+    settings: Option<CacheSettings>,
+    /// The object placements the records were made under (empty: none yet).
+    transforms: Vec<Affine3A>,
+    version: u64,
+    records: Vec<Record>,
+    /// Ring position of the next record once `records` is full.
+    next: usize,
+    grid: HashMap<[i32; 3], Vec<u32>>,
+}
+
+/// Counters of a cache's work (for tests and logs).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CacheStats {
+    pub records: usize,
+    /// Records dropped because a moved object could change them.
+    pub invalidated: u64,
+    /// Records dropped to stay within [`MAX_RECORDS`].
+    pub evicted: u64,
+}
+
+/// One scene's irradiance cache on a worker (see the module docs).
+pub struct IrradianceCache {
+    cell: f32,
+    state: RwLock<(State, CacheStats)>,
+}
+
+impl IrradianceCache {
+    /// An empty cache for a scene with these bounds.
+    pub fn new((lo, hi): (Vec3, Vec3)) -> IrradianceCache {
+        let diag = (hi - lo).length();
+        let cell = if diag.is_finite() && diag > 0.0 { diag / CELLS_ACROSS } else { 1.0 };
+        let state = State { settings: None, transforms: Vec::new(), version: 0, records: Vec::new(), next: 0, grid: HashMap::new() };
+        IrradianceCache { cell, state: RwLock::new((state, CacheStats::default())) }
+    }
+
+    fn key(&self, p: Vec3) -> [i32; 3] {
+        let c = (p / self.cell).floor().clamp(Vec3::splat(-1e6), Vec3::splat(1e6));
+        [c.x as i32, c.y as i32, c.z as i32]
+    }
+
+    /// The clamp range of R for accuracy `a`: a record serves at most a·R ≤ one cell away.
+    pub fn radius_range(&self, a: f32) -> (f32, f32) {
+        let r_max = self.cell / a;
+        (r_max / R_RANGE, r_max)
+    }
+
+    pub fn stats(&self) -> CacheStats {
+        let g = self.state.read().unwrap_or_else(|p| p.into_inner());
+        CacheStats { records: g.0.records.len(), ..g.1 }
+    }
+
+    /// Brings the cache to a batch's object placements and settings (dropping what they
+    /// invalidate, module docs) and returns the batch's ticket.
+    pub fn sync(&self, scene: &Scene, transforms: &[Affine3A], settings: CacheSettings) -> Ticket {
+        let mut g = self.state.write().unwrap_or_else(|p| p.into_inner());
+        let (s, stats) = &mut *g;
+        if s.settings != Some(settings) {
+            s.records.clear();
+            s.grid.clear();
+            s.next = 0;
+            s.settings = Some(settings);
+            s.transforms = transforms.to_vec();
+            s.version += 1;
+        } else if s.transforms.as_slice() != transforms {
+            let mut moved: Vec<(u32, [Vec3; 8], [Vec3; 8])> = Vec::new();
+            for (i, o) in scene.objects.iter().enumerate() {
+                let (old, new) = (s.transforms.get(i), transforms.get(i));
+                if old != new {
+                    let b = o.mesh.bounds;
+                    let boxes = |t: Option<&Affine3A>| box_corners(transformed_box(t.unwrap_or(&o.transform), b));
+                    moved.push((i as u32, boxes(old), boxes(new)));
+                }
+            }
+            let sees = |r: &Record| {
+                moved.iter().any(|(obj, old, new)| *obj == r.object || old.iter().chain(new).any(|c| r.n.dot(*c - r.p) > 0.0))
+            };
+            let before = s.records.len();
+            s.records.retain(|r| !sees(r));
+            stats.invalidated += (before - s.records.len()) as u64;
+            // Rebuild the grid over the kept records (indices moved).
+            s.grid.clear();
+            for (i, r) in s.records.iter().enumerate() {
+                s.grid.entry(self.key(r.p)).or_default().push(i as u32);
+            }
+            s.next = 0;
+            s.transforms = transforms.to_vec();
+            s.version += 1;
+        }
+        Ticket { version: s.version, settings }
+    }
+
+    /// Interpolated irradiance at (p, n), or `None` where no record is valid (or the ticket
+    /// is stale).
+    pub fn lookup(&self, t: &Ticket, p: Vec3, n: Vec3) -> Option<Vec3> {
+        let g = self.state.read().unwrap_or_else(|p| p.into_inner());
+        let s = &g.0;
+        if s.version != t.version {
+            return None;
+        }
+        let inv_a = 1.0 / t.settings.error;
+        let [x, y, z] = self.key(p);
+        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0f32);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(ids) = s.grid.get(&[x + dx, y + dy, z + dz]) else { continue };
+                    for &i in ids {
+                        let r = &s.records[i as usize];
+                        let w = r.weight(p, n);
+                        // Ward's "in front" test: a record whose point lies in front of p
+                        // (toward the normals) sees a different neighbourhood.
+                        if w <= inv_a || (p - r.p).dot(n + r.n) < -0.1 * r.r {
+                            continue;
+                        }
+                        sum += r.extrapolate(p, n) * w;
+                        wsum += w;
+                    }
+                }
+            }
+        }
+        (wsum > 0.0).then(|| sum / wsum)
+    }
+
+    /// Stores a record made from `g` at (p, n) on `object` (R clamped; module docs) and
+    /// returns it; stored only if the ticket is current and the record finite.
+    pub fn insert(&self, t: &Ticket, p: Vec3, n: Vec3, object: u32, g: &Gathered) -> Record {
+        let (r_min, r_max) = self.radius_range(t.settings.error);
+        let lum = |v: Vec3| v.x + v.y + v.z;
+        let gt_len = (g.grad_t[0] + g.grad_t[1] + g.grad_t[2]).length();
+        let mut r = g.r.min(r_max);
+        if gt_len > 0.0 && lum(g.e) > 0.0 {
+            r = r.min(lum(g.e) / gt_len);
+        }
+        let r = if r.is_nan() { r_max } else { r.max(r_min) };
+        let finite = |a: &[Vec3; 3]| a.iter().all(|v| v.is_finite());
+        let (grad_r, grad_t) = if finite(&g.grad_r) && finite(&g.grad_t) { (g.grad_r, g.grad_t) } else { ([Vec3::ZERO; 3], [Vec3::ZERO; 3]) };
+        let rec = Record { p, n, e: g.e, r, grad_r, grad_t, object };
+        if !(g.e.is_finite() && p.is_finite() && n.is_finite()) {
+            return rec;
+        }
+        let mut guard = self.state.write().unwrap_or_else(|p| p.into_inner());
+        let (s, stats) = &mut *guard;
+        if s.version != t.version {
+            return rec;
+        }
+        let key = self.key(p);
+        if s.records.len() < MAX_RECORDS {
+            s.grid.entry(key).or_default().push(s.records.len() as u32);
+            s.records.push(rec);
+        } else {
+            let i = s.next;
+            s.next = (s.next + 1) % MAX_RECORDS;
+            let old_key = self.key(s.records[i].p);
+            if let Some(ids) = s.grid.get_mut(&old_key) {
+                ids.retain(|&x| x as usize != i);
+                if ids.is_empty() {
+                    s.grid.remove(&old_key);
+                }
+            }
+            s.records[i] = rec;
+            s.grid.entry(key).or_default().push(i as u32);
+            stats.evicted += 1;
+        }
+        rec
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A point at (x0, 0, 0) facing +z under a plane at height h whose radiance is 1 where
+    /// x > 0 and 0 elsewhere (an occlusion edge, what the gradients are made for).
+    fn half_plane(x0: f32, h: f32) -> impl Fn(Vec3) -> (Vec3, f32) {
+        move |d: Vec3| {
+            if d.z <= 0.0 {
+                return (Vec3::ZERO, f32::INFINITY);
+            }
+            let t = h / d.z;
+            (Vec3::splat(if x0 + t * d.x > 0.0 { 1.0 } else { 0.0 }), t)
+        }
+    }
+
+    /// The closed form: the half-plane's projected solid angle is half the unit disk plus
+    /// half an ellipse of semi-axis c / √(1 + c²), c = x0 / h, so
+    /// E(x0) = π/2 (1 + x0 / √(x0² + h²)) and dE/dx0 = π/2 · h² / (x0² + h²)^{3/2}.
+    fn exact(x0: f32, h: f32) -> (f32, f32) {
+        let q = x0 * x0 + h * h;
+        (PI / 2.0 * (1.0 + x0 / q.sqrt()), PI / 2.0 * h * h / q.powf(1.5))
+    }
+
+    #[test]
+    fn gathered_irradiance_and_gradients_match_the_half_plane_closed_form() {
+        let frame = Frame::from_normal(Vec3::Z);
+        for (x0, h) in [(0.3f32, 1.0f32), (-0.5, 2.0), (0.0, 0.5)] {
+            let (e, de) = exact(x0, h);
+            let runs = 16;
+            let (mut ge, mut gt, mut gr) = (0.0, Vec3::ZERO, Vec3::ZERO);
+            for seed in 0..runs {
+                let g = gather(&frame, 1024, &mut Rng::new(seed, 1), half_plane(x0, h));
+                ge += g.e.x / runs as f32;
+                gt += g.grad_t[0] / runs as f32;
+                gr += g.grad_r[0] / runs as f32;
+            }
+            assert!((ge - e).abs() < 0.01 * e, "E at {x0}, {h}: {ge} vs {e}");
+            // Ward & Heckbert's estimate is itself an approximation of the derivative at
+            // the strata's resolution: 10 %.
+            assert!((gt.x - de).abs() < 0.1 * de, "dE/dx at {x0}, {h}: {} vs {de}", gt.x);
+            assert!(gt.y.abs() < 0.05 * de && gt.z.abs() < 1e-6, "{gt}");
+            // Rotation: tilting the normal toward +x by β changes E by β ∫ L ω_x dω, and
+            // (n_i × n)·∇r = β ∇r.y. The integral by a fine midpoint rule in (θ, φ):
+            let steps = 1000;
+            let mut rot = 0.0f64;
+            for i in 0..steps {
+                let th = (i as f64 + 0.5) / steps as f64 * std::f64::consts::FRAC_PI_2;
+                for j in 0..steps {
+                    let ph = (j as f64 + 0.5) / steps as f64 * std::f64::consts::TAU;
+                    let d = Vec3::new((th.sin() * ph.cos()) as f32, (th.sin() * ph.sin()) as f32, th.cos() as f32);
+                    let l = half_plane(x0, h)(d).0.x as f64;
+                    rot += l * th.sin() * ph.cos() * th.sin() * (std::f64::consts::FRAC_PI_2 / steps as f64) * (std::f64::consts::TAU / steps as f64);
+                }
+            }
+            assert!((gr.y as f64 - rot).abs() < 0.1 * rot.abs().max(0.1), "rotation at {x0}, {h}: {} vs {rot}", gr.y);
+        }
+    }
+
+    #[test]
+    fn records_serve_within_their_radius_and_extrapolate_with_gradients() {
+        let cache = IrradianceCache::new((Vec3::ZERO, Vec3::splat(32.0)));
+        let settings = CacheSettings { error: 0.2, rays: 64, max_depth: 2 };
+        let scene = Scene { objects: vec![], ..edgepoint_scene::builtin::load("cornell").unwrap() };
+        let t = cache.sync(&scene, &[], settings);
+        let g = Gathered { e: Vec3::splat(2.0), r: 2.0, grad_r: [Vec3::ZERO; 3], grad_t: [Vec3::new(0.5, 0.0, 0.0); 3] };
+        let rec = cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g);
+        // R: 2 is inside [Rmax/16, Rmax] (cell 1.73, Rmax 8.7) and below E/|∇t| = 6/1.5.
+        assert_eq!(rec.r, 2.0);
+        let at = |dx: f32| cache.lookup(&t, Vec3::splat(10.0) + Vec3::new(dx, 0.0, 0.0), Vec3::Y);
+        assert_eq!(at(0.0), Some(Vec3::splat(2.0)));
+        assert!((at(0.3).unwrap() - Vec3::splat(2.15)).abs().max_element() < 1e-5, "extrapolated with ∇t");
+        // Weight 1/(d/R) must exceed 1/a: d < a R = 0.4.
+        assert!(at(0.39).is_some() && at(0.41).is_none());
+        // A normal turned away beyond the same budget: √(1 − cos) ≥ a.
+        assert!(cache.lookup(&t, Vec3::splat(10.0), Vec3::new(0.0, 0.9, 0.436).normalize()).is_none());
+        // A different setting empties the cache and stales the old ticket.
+        let t2 = cache.sync(&scene, &[], CacheSettings { error: 0.3, ..settings });
+        assert!(cache.lookup(&t2, Vec3::splat(10.0), Vec3::Y).is_none() && cache.lookup(&t, Vec3::splat(10.0), Vec3::Y).is_none());
+        cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g);
+        assert_eq!(cache.stats().records, 0, "a stale ticket stores nothing");
+    }
+}
