@@ -68,6 +68,16 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "cache_rays", min: 16.0, max: 4096.0, default: 256.0, integer: true, help: "hemisphere rays per irradiance record (M x N strata, N ~ pi M)" },
         ],
     },
+    ShaderInfo {
+        name: "hybrid",
+        help: "paper 004: soft shadows from area-light samples, one-bounce indirect light from the K virtual point lights that reflect the most light (equal-area surface elements ranked by reflected flux; built once per scene, object placement and parameters on each worker), ray-traced specular reflection and refraction; no ambient term",
+        params: &[
+            SHADOW_RAYS,
+            ShaderParam { name: "vpls", min: 0.0, max: 4096.0, default: 64.0, integer: true, help: "virtual point lights K: the surface elements reflecting the most light, one shadow ray each per shaded surface (0: no indirect light)" },
+            ShaderParam { name: "elements", min: 16.0, max: 65536.0, default: 4096.0, integer: true, help: "equal-area surface elements the VPLs are chosen from (about this many over the scene's diffuse surfaces; each costs 16 shadow rays per light when the VPLs are built)" },
+            ShaderParam { name: "max_depth", min: 0.0, max: 16.0, default: 5.0, integer: true, help: "specular bounces traced (mirror reflection; glass splits into reflection and refraction); 0: delta surfaces show no scene" },
+        ],
+    },
 ];
 
 /// The shader called `name` (`""` is [`DEFAULT_SHADER`]).
@@ -151,6 +161,11 @@ mod tests {
             assert!(resolve("gi", &given(&[bad])).unwrap_err().contains(bad.0));
         }
         assert!(resolve("glossy", &given(&[("rays", 0.5)])).is_err());
+        let h = resolve("hybrid", &given(&[("vpls", 0.0)])).unwrap();
+        assert_eq!((h["vpls"], h["elements"], h["max_depth"], h["shadow_rays"]), (0.0, 4096.0, 5.0, 16.0));
+        for bad in [("vpls", 4097.0), ("vpls", -1.0), ("elements", 8.0), ("elements", 1e6), ("max_depth", 17.0), ("max_depth", 1.5), ("ambient", 1.0)] {
+            assert!(resolve("hybrid", &given(&[bad])).unwrap_err().contains(bad.0));
+        }
         // Every row is consistent: the default is valid.
         for s in SHADERS {
             for p in s.params {

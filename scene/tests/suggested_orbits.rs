@@ -68,6 +68,7 @@ fn procedural_builtins_orbit_inside_their_rooms_and_outside_every_object() {
     for (name, enclosed, content) in [
         ("cornell", true, &["shortbox", "tallbox"][..]),
         ("cornell-point", true, &["shortbox", "tallbox"][..]),
+        ("cornell-glass", true, &["glass", "mirror"][..]),
         ("chains", false, &["chain1-link3", "chain2-link4", "chain0-link4", "chain3-link3"][..]),
         ("torus-capsule", false, &["torus", "capsule"][..]),
         ("rooms", true, &["table0", "ball0"][..]),

@@ -39,7 +39,7 @@ pub fn light_pdf(a: &AreaLight, d2: f32, cos_l: f32) -> f32 {
 
 /// Where the ray `origin + t dir` meets the emitting side of area light `a`: (t, cos at the
 /// light). Möller–Trumbore on the light's fan triangles.
-fn hit_area_light(a: &AreaLight, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
+pub(crate) fn hit_area_light(a: &AreaLight, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
     let cos_l = -a.normal.dot(dir);
     if cos_l.is_nan() || cos_l <= 0.0 {
         return None;

@@ -1,5 +1,5 @@
 //! edgepoint shader worker: loads scenes, builds a two-level BVH ([`bvh`]), shades batches of
-//! ray requests ([`shader`]: `direct`, `glossy`, `gi`) and serves them over gRPC ([`service`]), with its command line in
+//! ray requests ([`shader`]: `direct`, `glossy`, `gi`, `hybrid`) and serves them over gRPC ([`service`]), with its command line in
 //! [`cli`] and its Prometheus metrics in [`metrics`].
 pub mod baseline;
 pub mod bsdf_rays;
@@ -19,4 +19,4 @@ pub mod triples;
 pub use bvh::{BvhShape, Hit, Instances, SceneBvh};
 pub use loaded::LoadedScene;
 pub use triples::sample_triples;
-pub use shader::{shade_batch, DirectParams, GiParams, GlossyParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};
+pub use shader::{shade_batch, DirectParams, GiParams, GlossyParams, HybridParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

@@ -2,6 +2,7 @@
 //! sampling. Built once per scene hash and shared by every stream that shades it.
 use crate::bvh::{Instances, SceneBvh};
 use crate::shader::irradiance_cache::IrradianceCache;
+use crate::shader::vpl::VplCache;
 use edgepoint_scene::{Light, Progress, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
@@ -88,6 +89,8 @@ pub struct LoadedScene {
     pub build_ms: f64,
     /// The `gi` shader's irradiance records for this scene on this worker.
     pub irradiance: IrradianceCache,
+    /// The `hybrid` shader's virtual point lights for this scene on this worker.
+    pub vpls: VplCache,
 }
 
 impl LoadedScene {
@@ -100,7 +103,7 @@ impl LoadedScene {
         let epsilon = ((hi - lo).length() * 1e-5).max(1e-6);
         let lights = scene.lights.iter().map(PreparedLight::new).collect();
         let irradiance = IrradianceCache::new((lo, hi));
-        LoadedScene { scene: Arc::new(scene), bvh, hash, lights, epsilon, build_ms: t.elapsed().as_secs_f64() * 1e3, irradiance }
+        LoadedScene { scene: Arc::new(scene), bvh, hash, lights, epsilon, build_ms: t.elapsed().as_secs_f64() * 1e3, irradiance, vpls: VplCache::default() }
     }
 
     /// The top level for one epoch's object transforms (one per object).

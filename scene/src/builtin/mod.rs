@@ -1,6 +1,7 @@
 //! Built-in scenes: the Cornell box, and scenes after paper 000's (§7.1, Figures 7, 9, 12,
 //! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`; `materials`, the demo of the
-//! scattering models; and `glossy-bunny`, the `glossy` shader's scene.
+//! scattering models; `glossy-bunny`, the `glossy` shader's scene; and `cornell-glass`
+//! (paper 004 Fig. 10), the `hybrid` shader's.
 //!
 //! Most are procedural. `grid-dragon` (and `glossy-bunny`) is built around the shared Stanford dragon, which is
 //! data, not code: such a built-in names its data files ([`data_files`]) and is built by
@@ -11,6 +12,7 @@
 //! [`crate::data`].
 mod chains;
 mod cornell;
+mod cornell_glass;
 mod glossy_bunny;
 mod grid_dragon;
 mod materials;
@@ -27,6 +29,7 @@ use std::sync::Arc;
 pub const BUILTINS: &[(&str, &str)] = &[
     ("cornell", "Cornell box with a tall and a short box under the square ceiling area light"),
     ("cornell-point", "the Cornell box lit by a point light under the ceiling centre"),
+    ("cornell-glass", "the Cornell box with a glass sphere and a mirror on the short box (paper 004 Fig. 10): for the hybrid shader"),
     ("chains", "32 tessellated linked tori in four chains on a floor, two point lights (paper Fig. 7)"),
     ("torus-capsule", "a torus resting on a capsule under a square area light: contact hardening (paper Fig. 9)"),
     ("grid-dragon", "a grid casting a shadow pattern on the Stanford dragon, point light (paper Fig. 13; needs dragon/dragon_vrip.ply)"),
@@ -53,6 +56,7 @@ pub fn load(name: &str) -> Result<Scene, String> {
     match name {
         "cornell" => Ok(cornell::cornell(false)),
         "cornell-point" => Ok(cornell::cornell(true)),
+        "cornell-glass" => Ok(cornell_glass::cornell_glass()),
         "chains" => Ok(chains::chains()),
         "torus-capsule" => Ok(torus_capsule::torus_capsule()),
         "rooms" => Ok(rooms::rooms()),

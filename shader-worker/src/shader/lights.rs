@@ -13,6 +13,7 @@ use crate::loaded::{LoadedScene, PreparedLight};
 use crate::rng::Rng;
 use crate::surface::ShadingPoint;
 use glam::Vec3;
+use std::ops::Range;
 
 /// One shading point's light-sampling job.
 pub(crate) struct LightQuery<'a> {
@@ -32,7 +33,14 @@ pub(crate) struct LightQuery<'a> {
 
 /// Adds the sampled direct light at `q` to `rgb` (in the order the `direct` shader always
 /// summed it, so its output is unchanged to the bit), recording triples if `triples` is given.
-pub(crate) fn add_direct_light(scene: &LoadedScene, inst: &Instances, q: &LightQuery, rng: &mut Rng, mut triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
+pub(crate) fn add_direct_light(scene: &LoadedScene, inst: &Instances, q: &LightQuery, rng: &mut Rng, triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
+    add_direct_light_in(scene, inst, q, 0..scene.lights.len(), rng, triples, rgb);
+}
+
+/// [`add_direct_light`] for the lights whose index lies in `lights` only: a share of the
+/// shading (the `hybrid` shader samples one light at a time with its own random stream, so
+/// any subset of lights can be shaded apart and summed).
+pub(crate) fn add_direct_light_in(scene: &LoadedScene, inst: &Instances, q: &LightQuery, lights: Range<usize>, rng: &mut Rng, mut triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
     let sp = q.sp;
     let (n, origin) = (q.n, q.origin);
     // Light samples reach the non-delta part; a pure mirror or smooth glass gets nothing from
@@ -44,7 +52,7 @@ pub(crate) fn add_direct_light(scene: &LoadedScene, inst: &Instances, q: &LightQ
             push_unique(t, [li, b, q.receiver]);
         }
     };
-    for (li, light) in scene.lights.iter().enumerate() {
+    for (li, light) in scene.lights.iter().enumerate().take(lights.end).skip(lights.start) {
         let li = li as u32;
         match light {
             PreparedLight::Point { position, intensity, cone } => {

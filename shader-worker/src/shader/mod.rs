@@ -6,21 +6,28 @@
 //! - [`direct`]: direct light with ambient (paper 000 §7's first shader);
 //! - [`glossy`]: `direct` plus glossy and mirror reflection by BSDF sampling;
 //! - [`gi`]: path tracing with next-event estimation and MIS, Russian roulette, and the
-//!   per-worker [`irradiance_cache`] for the diffuse indirect term.
+//!   per-worker [`irradiance_cache`] for the diffuse indirect term;
+//! - [`hybrid`]: paper 004's soft shadows, one-bounce indirect light from virtual point
+//!   lights ([`vpl`] over equal-area [`elements`]) and ray-traced specular reflection and
+//!   refraction.
 //!
 //! Shared pieces: [`hit::Surface`] (a hit made ready to shade), the light-sampling estimator
 //! ([`lights`]) and the NaN / infinity filter in [`finish`], so no shader can let a
 //! non-finite value leave the worker.
 pub mod direct;
+pub mod elements;
 pub mod gi;
 pub mod glossy;
+pub mod hybrid;
 pub mod irradiance_cache;
+pub mod vpl;
 mod hit;
 mod lights;
 
 pub use direct::DirectParams;
 pub use gi::GiParams;
 pub use glossy::GlossyParams;
+pub use hybrid::HybridParams;
 
 use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
@@ -30,7 +37,7 @@ use std::collections::{HashMap, HashSet};
 
 /// Names of the shaders this worker offers: every row of the shared table
 /// ([`edgepoint_proto::shaders::SHADERS`]).
-pub const SHADERS: &[&str] = &["direct", "glossy", "gi"];
+pub const SHADERS: &[&str] = &["direct", "glossy", "gi", "hybrid"];
 
 /// A parsed shader with its parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,6 +45,7 @@ pub enum ShaderSpec {
     Direct(DirectParams),
     Glossy(GlossyParams),
     Gi(GiParams),
+    Hybrid(HybridParams),
 }
 
 impl ShaderSpec {
@@ -57,6 +65,12 @@ impl ShaderSpec {
                 cache: whole("cache") == 1,
                 cache_error: p["cache_error"] as f32,
                 cache_rays: whole("cache_rays"),
+            })),
+            Some("hybrid") => Ok(ShaderSpec::Hybrid(HybridParams {
+                shadow_rays: whole("shadow_rays"),
+                vpls: whole("vpls"),
+                elements: whole("elements"),
+                max_depth: whole("max_depth"),
             })),
             _ => Err(format!("shader '{name}' is in the table but not built into this worker (it offers: {})", SHADERS.join(", "))),
         }
@@ -117,7 +131,8 @@ pub(crate) type Shaded = (SampleOut, Vec<[u32; 3]>, bool);
 /// Shades `requests` in parallel (rayon, on the current pool) with transforms `inst`.
 /// Deterministic for a given `seed` (the random numbers of a request depend only on
 /// (seed, request id)), except `gi` with its irradiance cache on: which records exist
-/// depends on the order threads create them.
+/// depends on the order threads create them. `hybrid` first builds its virtual point
+/// lights if this scene, transforms and parameters have none yet.
 pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, seed: u64, requests: &[RayRequest]) -> ShadeOutput {
     let per: Vec<Shaded> = match spec {
         ShaderSpec::Direct(p) => requests.par_iter().map(|r| direct::shade(scene, inst, p, seed, r)).collect(),
@@ -125,6 +140,10 @@ pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, see
         ShaderSpec::Gi(p) => {
             let cache = p.cache.then(|| scene.irradiance.sync(&scene.scene, inst.transforms(), p.cache_settings()));
             requests.par_iter().map(|r| gi::shade(scene, inst, p, cache, seed, r)).collect()
+        }
+        ShaderSpec::Hybrid(p) => {
+            let vpls = scene.vpls.get(scene, inst, p.vpl_settings());
+            requests.par_iter().map(|r| hybrid::shade(scene, inst, p, &vpls, seed, r)).collect()
         }
     };
     merge(per)
