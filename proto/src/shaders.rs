@@ -76,6 +76,7 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "vpls", min: 0.0, max: 4096.0, default: 64.0, integer: true, help: "virtual point lights K: the surface elements reflecting the most light, one shadow ray each per shaded surface (0: no indirect light)" },
             ShaderParam { name: "elements", min: 16.0, max: 65536.0, default: 4096.0, integer: true, help: "equal-area surface elements the VPLs are chosen from (about this many over the scene's diffuse surfaces; each costs 16 shadow rays per light when the VPLs are built)" },
             ShaderParam { name: "max_depth", min: 0.0, max: 16.0, default: 5.0, integer: true, help: "specular bounces traced (mirror reflection; glass splits into reflection and refraction); 0: delta surfaces show no scene" },
+            ShaderParam { name: "conserve", min: 0.0, max: 1.0, default: 1.0, integer: true, help: "1: the K VPLs share the reflected flux of every lit element in proportion to their own (the paper's intensities proportional to the weights; no indirect energy lost); 0: each carries its own element's flux (exact one bounce when K covers every lit element)" },
         ],
     },
 ];

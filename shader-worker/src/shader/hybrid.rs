@@ -53,12 +53,14 @@ pub struct HybridParams {
     pub elements: u32,
     /// Specular bounces traced (`max_depth`).
     pub max_depth: u32,
+    /// The K VPLs carry the flux of every candidate (`conserve`).
+    pub conserve: bool,
 }
 
 impl HybridParams {
     /// What the VPL set depends on.
     pub fn vpl_settings(&self) -> VplSettings {
-        VplSettings { count: self.vpls, elements: self.elements }
+        VplSettings { count: self.vpls, elements: self.elements, conserve: self.conserve }
     }
 }
 

@@ -71,6 +71,7 @@ impl ShaderSpec {
                 vpls: whole("vpls"),
                 elements: whole("elements"),
                 max_depth: whole("max_depth"),
+                conserve: whole("conserve") == 1,
             })),
             _ => Err(format!("shader '{name}' is in the table but not built into this worker (it offers: {})", SHADERS.join(", "))),
         }

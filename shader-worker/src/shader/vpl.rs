@@ -22,7 +22,13 @@
 //! exact disk it is exact on the axis and close elsewhere. So the bias is a darkening
 //! within a few element radii of each VPL (inside corners), shrinking with smaller elements.
 //! Keeping only K of the candidates drops the indirect light of all others: the set
-//! reports the share of the candidates' flux it keeps ([`VplSet::kept_flux`]).
+//! reports the share of the candidates' flux it keeps ([`VplSet::kept_flux`]). With
+//! `conserve` (the default) the kept VPLs are scaled by one factor so that together they
+//! reflect the flux of every candidate — the paper sets its lights' intensities
+//! "proportional to the assigned weight" — which keeps the image's indirect energy but
+//! moves it toward the brightest elements (less colour bleeding from dimmer walls than
+//! a full one bounce would have); without it each VPL carries its own element's flux,
+//! exact one bounce (up to discretisation and clamping) once K covers every candidate.
 //!
 //! **Cache:** a worker keeps the sets of the last [`KEPT_SETS`] (transforms, settings)
 //! keys per scene. A batch whose object transforms differ from every kept set's (an object
@@ -57,6 +63,8 @@ pub struct VplSettings {
     pub count: u32,
     /// Target number of elements.
     pub elements: u32,
+    /// Scale the kept VPLs to the flux of every candidate.
+    pub conserve: bool,
 }
 
 /// One virtual point light.
@@ -198,7 +206,7 @@ pub fn build(scene: &LoadedScene, inst: &Instances, settings: VplSettings) -> Vp
             }
         }
     });
-    let total_flux = candidates.iter().map(|c| c.flux).sum();
+    let total_flux: Vec3 = candidates.iter().map(|c| c.flux).sum();
     let n_candidates = candidates.len();
     // Brightest first; ties by element and side so the order never depends on the threads.
     let key = |c: &Candidate| (-luminance(c.flux), c.element, -c.side as i32);
@@ -209,15 +217,18 @@ pub fn build(scene: &LoadedScene, inst: &Instances, settings: VplSettings) -> Vp
     }
     candidates.truncate(k);
     candidates.sort_unstable_by(by);
+    let kept_flux: Vec3 = candidates.iter().map(|c| c.flux).sum();
+    // Conserving: one scale for all (luminance ratio: no colour shift), so the K VPLs
+    // reflect what every lit element does.
+    let scale = if settings.conserve && luminance(kept_flux) > 0.0 { luminance(total_flux) / luminance(kept_flux) } else { 1.0 };
     let vpls: Vec<Vpl> = candidates
         .iter()
         .map(|c| {
             let e = &elements[c.element];
             let normal = e.normal * c.side;
-            Vpl { position: c.position + normal * scene.epsilon, normal, intensity: c.flux * FRAC_1_PI, clamp_r2: e.area * FRAC_1_PI, object: e.object }
+            Vpl { position: c.position + normal * scene.epsilon, normal, intensity: c.flux * (scale * FRAC_1_PI), clamp_r2: e.area * FRAC_1_PI, object: e.object }
         })
         .collect();
-    let kept_flux = candidates.iter().map(|c| c.flux).sum();
     VplSet { vpls, elements: elements.len(), candidates: n_candidates, total_flux, kept_flux, build_ms: t0.elapsed().as_secs_f64() * 1e3 }
 }
 
