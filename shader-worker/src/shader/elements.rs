@@ -98,7 +98,7 @@ pub fn tessellate(scene: &Scene, transforms: &[Affine3A], target: u32) -> Vec<El
             let w = world(oi, ti);
             let a = area(w);
             let normal = (to_world * o.mesh.face_normals[ti]).normalize_or_zero();
-            if !(a > 0.0) || normal == Vec3::ZERO {
+            if a.is_nan() || a <= 0.0 || normal == Vec3::ZERO {
                 continue;
             }
             let mk = |tri: [Vec3; 3], area: f32, bary: Vec3| Element { tri, normal, area, albedo: albedo(o, ti, bary), object: oi as u32, two_sided: o.material.two_sided };

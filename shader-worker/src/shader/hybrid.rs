@@ -151,7 +151,7 @@ fn radiance(ctx: &Ctx, s: &Surface, depth: u32, beta: Vec3, vertex: &mut u64, mu
     }
     for (wi, weight) in delta_branches(s) {
         let b = beta * weight;
-        if !(b.max_element() >= BRANCH_CUTOFF) || !b.is_finite() {
+        if !b.is_finite() || b.max_element() < BRANCH_CUTOFF {
             continue;
         }
         let origin = s.spawn(wi, scene.epsilon);

@@ -137,7 +137,7 @@ fn receive(scene: &LoadedScene, inst: &Instances, e: &Element, ei: usize) -> [(V
                     let to = a.sample(u, v) - x;
                     let d2 = to.length_squared();
                     let cos_l = -a.normal.dot(to) / d2.sqrt();
-                    if !(cos_l > 0.0) {
+                    if cos_l.is_nan() || cos_l <= 0.0 {
                         continue;
                     }
                     (to, a.radiance * (cos_l * a.area / (d2 * k as f32)))
@@ -147,7 +147,7 @@ fn receive(scene: &LoadedScene, inst: &Instances, e: &Element, ei: usize) -> [(V
             let wi = to / dist;
             let cos_n = e.normal.dot(wi);
             let side = if cos_n > 0.0 { 0 } else { 1 };
-            if !(cos_n.abs() > 0.0) || (side == 1 && !e.two_sided) {
+            if cos_n.is_nan() || cos_n == 0.0 || (side == 1 && !e.two_sided) {
                 continue;
             }
             let n = if side == 0 { e.normal } else { -e.normal };
@@ -268,11 +268,13 @@ pub fn vpl_range<'a>(set: &'a VplSet, range: &Range<usize>) -> &'a [Vpl] {
 }
 
 type Key = (Vec<Affine3A>, VplSettings);
+/// A set, built once by whichever batch asks first.
+type Cell = Arc<OnceLock<Arc<VplSet>>>;
 
 /// A scene's VPL sets on a worker (module docs).
 #[derive(Default)]
 pub struct VplCache {
-    sets: Mutex<Vec<(Key, Arc<OnceLock<Arc<VplSet>>>)>>,
+    sets: Mutex<Vec<(Key, Cell)>>,
     builds: std::sync::atomic::AtomicU64,
 }
 
