@@ -74,11 +74,15 @@ fn plan(b2: &Bvh2, counts: &[u32], order: &[u32]) -> Plan {
             continue;
         }
         let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
-        // dist[j - 1]: the two subtrees spread over j slots (j >= 2).
+        // dist[j - 1]: the two subtrees spread over j slots (j >= 2). A subtree of c
+        // primitives never uses more than c slots (its cost is flat from there), so only
+        // splits within both subtrees' counts are tried: most binary nodes are small.
+        let (cl, cr) = (counts[l].min(8) as usize, counts[r].min(8) as usize);
+        let jmax = (cl + cr).min(8);
         let mut dist = [f32::INFINITY; 8];
         let mut dist_k = [0u8; 8];
-        for j in 2..=8 {
-            for left in 1..j {
+        for j in 2..=jmax {
+            for left in j.saturating_sub(cr).max(1)..=cl.min(j - 1) {
                 let c = p.cost[l][left - 1] + p.cost[r][j - left - 1];
                 if c < dist[j - 1] {
                     dist[j - 1] = c;
@@ -87,8 +91,9 @@ fn plan(b2: &Bvh2, counts: &[u32], order: &[u32]) -> Plan {
             }
         }
         let leaf = if counts[k] <= MAX_LEAF { LEAF_COST * area } else { f32::INFINITY };
-        let inner = NODE_COST * area + dist[7];
-        p.split8[k] = dist_k[7];
+        // With more slots a spread never costs more, so the best is at the most slots.
+        let inner = NODE_COST * area + dist[jmax - 1];
+        p.split8[k] = dist_k[jmax - 1];
         let (mut c, mut ch) = if leaf <= inner { (leaf, Choice::Leaf) } else { (inner, Choice::Inner) };
         p.cost[k][0] = c;
         p.choice[k][0] = ch;
