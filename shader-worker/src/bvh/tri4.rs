@@ -201,6 +201,8 @@ impl TriTest for Baseline {
 mod tests {
     use super::*;
 
+    type Distances = ([f32; 4], u32);
+
     /// The SSE test and the lane-by-lane one agree bit for bit on random triangles and
     /// rays (the same operations in the same order), including empty lanes; so do the FMA
     /// test and the lane-by-lane one with fused multiply-adds, where the CPU has FMA.
@@ -222,7 +224,8 @@ mod tests {
             let d = Vec3A::from((a + b + c) / 3.0 + v() * 0.3) - o;
             // A finite tmax on some rays so the distance test is exercised too.
             let tmax = if n % 3 == 0 { 1.0 } else { f32::INFINITY };
-            let mut forms: Vec<(&str, ([f32; 4], u32), ([f32; 4], u32))> = Vec::new();
+            // (name, the SIMD test's distances and mask, the lane-by-lane ones)
+            let mut forms: Vec<(&str, Distances, Distances)> = Vec::new();
             // SAFETY: SSE is baseline on x86-64; FMA is only run when detected.
             #[cfg(target_arch = "x86_64")]
             unsafe {
