@@ -77,12 +77,21 @@ pub struct PaceArgs {
     /// Frame-rate cap of the server's frame loop (server default 30).
     #[arg(long)]
     pub max_fps: Option<f64>,
+    /// Frame-rate cap while the camera and the objects are still (server default 10; the
+    /// frame loop leaves the rest of the machine to the workers; equal to --max-fps: off).
+    #[arg(long)]
+    pub rest_fps: Option<f64>,
 }
 
 impl PaceArgs {
     /// Session settings with this pace (0: the server's default).
     pub fn settings(&self) -> pb::Settings {
-        pb::Settings { sparseness: self.sparseness.unwrap_or(0.0), max_fps: self.max_fps.unwrap_or(0.0), ..Default::default() }
+        pb::Settings {
+            sparseness: self.sparseness.unwrap_or(0.0),
+            max_fps: self.max_fps.unwrap_or(0.0),
+            rest_fps: self.rest_fps.unwrap_or(0.0),
+            ..Default::default()
+        }
     }
 }
 
@@ -256,6 +265,10 @@ pub fn run(args: FrameArgs) -> Result<()> {
         let mut samples = Vec::new();
         let mut last: Option<pb::Frame> = None;
         let mut first_at: Option<Instant> = None;
+        // The server's CPU time (every thread: the frame loop, its rayon pool, the gRPC
+        // threads decoding samples) from the first frame on: what a frame costs the machine,
+        // which the wall-clock stage times show only through the noise of other load.
+        let mut server_cpu0: Option<f64> = None;
         let mut dropped = 0u64;
         let mut first_tree_frame: Option<u64> = None;
         // The same per-stage times, only of frames whose edges came from the edge trees (the
@@ -272,7 +285,10 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 Some(Ok(Event::Rejected(r))) => bail!("server rejected a message: {}", r.message),
                 Some(Ok(Event::Progress(_) | Event::Picked(_))) => {}
                 Some(Ok(Event::Frame(f))) => {
-                    first_at.get_or_insert_with(Instant::now);
+                    if first_at.is_none() {
+                        first_at = Some(Instant::now());
+                        server_cpu0 = cluster.server_pid().and_then(process_cpu_seconds);
+                    }
                     for s in &f.stages {
                         if !stage_ms.contains_key(&s.stage) {
                             stage_order.push(s.stage.clone());
@@ -294,6 +310,10 @@ pub fn run(args: FrameArgs) -> Result<()> {
             }
         }
         let wall = first_at.map(|t| t.elapsed().as_secs_f64()).unwrap_or(0.0);
+        let server_cpu_ms_per_frame = match (server_cpu0, cluster.server_pid().and_then(process_cpu_seconds)) {
+            (Some(a), Some(b)) if totals.len() > 1 => Some((b - a) * 1e3 / (totals.len() - 1) as f64),
+            _ => None,
+        };
         drop(client);
         let last = last.expect("at least one frame");
         let img = edgepoint_viewer::frame::decode_frame(&last)?;
@@ -316,6 +336,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             "session_start_ms": session_start_ms,
             "stages_median_ms": stage_order.iter().map(|s| (s.clone(), json!(median(&stage_ms[s])))).collect::<serde_json::Map<_, _>>(),
             "total_median_ms": median_total,
+            "server_cpu_ms_per_frame": server_cpu_ms_per_frame,
             "pipeline_fps": if median_total > 0.0 { 1000.0 / median_total } else { 0.0 },
             "fps": fps,
             "samples_per_frame_mean": mean_samples,
@@ -371,6 +392,9 @@ pub fn run(args: FrameArgs) -> Result<()> {
             writeln!(table, "  {:<14} {:>8.2} ms (median)", s, median(&stage_ms[s]))?;
         }
         writeln!(table, "  {:<14} {:>8.2} ms (median) -> pipeline {:.1} fps", "total", median_total, out["pipeline_fps"].as_f64().unwrap_or(0.0))?;
+        if let Some(cpu) = server_cpu_ms_per_frame {
+            writeln!(table, "  server CPU     {cpu:>8.2} ms per frame (all its threads)")?;
+        }
         writeln!(table, "  delivered fps  {fps:.1}; samples/frame {mean_samples:.0}; sparseness ratio {:.1}", out["sparseness_ratio"].as_f64().unwrap_or(0.0))?;
         if let (Some(first), Some(t)) = (first_tree_frame, out["total_median_ms_with_edge_trees"].as_f64()) {
             writeln!(
@@ -451,4 +475,17 @@ pub fn run_reference(args: ReferenceArgs) -> Result<()> {
         crate::emit(args.json, &out, &table);
         Ok(())
     })
+}
+
+/// User + system CPU seconds of process `pid` so far, from `/proc/PID/stat` (Linux; `None`
+/// elsewhere or when it cannot be read). The kernel reports them in USER_HZ ticks, which
+/// Linux fixes at 100 per second for user space.
+fn process_cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count from after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // Fields 14 (utime) and 15 (stime) of the whole line are the 12th and 13th after ')'.
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }

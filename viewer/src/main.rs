@@ -228,6 +228,14 @@ struct Args {
     #[arg(long, value_name = "FPS", allow_negative_numbers = true, value_parser = parse_positive_f64)]
     max_fps: Option<f64>,
 
+    /// Cap on the server's frame rate while the camera and the objects are still (after 8
+    /// still frames); the server's default is 10. The frames at rest only add the samples
+    /// that arrived since the last one, and a frame not made leaves the machine to the
+    /// shader workers, so a still image converges faster. The first camera change or object
+    /// move is answered at the --max-fps rate. Equal to --max-fps: no slowing down.
+    #[arg(long, value_name = "FPS", allow_negative_numbers = true, value_parser = parse_positive_f64)]
+    rest_fps: Option<f64>,
+
     #[command(flatten)]
     reconstruction: ReconstructionArgs,
 
@@ -404,8 +412,13 @@ fn run(args: Args) -> Result<()> {
         (None, None) => unreachable!("a cluster is started whenever --server is absent"),
     };
 
-    let settings = (args.sparseness.is_some() || args.max_fps.is_some() || args.reconstruction.is_set()).then(|| {
-        let mut s = pb::Settings { sparseness: args.sparseness.unwrap_or(0.0), max_fps: args.max_fps.unwrap_or(0.0), ..Default::default() };
+    let settings = (args.sparseness.is_some() || args.max_fps.is_some() || args.rest_fps.is_some() || args.reconstruction.is_set()).then(|| {
+        let mut s = pb::Settings {
+            sparseness: args.sparseness.unwrap_or(0.0),
+            max_fps: args.max_fps.unwrap_or(0.0),
+            rest_fps: args.rest_fps.unwrap_or(0.0),
+            ..Default::default()
+        };
         args.reconstruction.apply(&mut s);
         s
     });

@@ -57,6 +57,42 @@ pub fn max_outstanding(per_frame: usize, rate: f64) -> usize {
     }
     ((rate * TARGET_SAMPLE_LATENCY.as_secs_f64()) as usize).clamp(per_frame, most)
 }
+
+/// Frames the camera and the objects must have stayed still before the session samples at
+/// the workers' pace instead of its interactive budget (about a quarter of a second at 30
+/// fps: an orbit or a drag never pauses that long between frames).
+pub const REST_AFTER_FRAMES: u32 = 8;
+
+/// The pause between frame starts: the interactive one (`max_fps`) and the one to keep
+/// while nothing moves (`rest_fps`, when lower). At rest a frame only adds the samples
+/// that arrived since the last one, and on a machine the frame loop shares with the
+/// workers (one host) every frame it does not make leaves the workers more time to shade:
+/// the image converges faster at 10 frames a second than at 30.
+pub fn frame_periods(s: &SessionSettings, still_frames: u32) -> (Duration, Duration) {
+    let interactive = Duration::from_secs_f64(1.0 / s.max_fps);
+    if still_frames >= REST_AFTER_FRAMES && s.rest_fps < s.max_fps {
+        (interactive, Duration::from_secs_f64(1.0 / s.rest_fps))
+    } else {
+        (interactive, interactive)
+    }
+}
+
+/// Requests to send this frame, given the frame's interactive budget `per_frame`, the
+/// `room` left under [`max_outstanding`], and how many frames the view has been still.
+///
+/// In motion a frame asks for at most its budget: samples requested now are for this
+/// view, and more in flight would only arrive for views already gone. At rest nothing
+/// goes stale, so every free place in flight is filled: the workers, otherwise idle for
+/// most of a frame at 1/64 of the pixels per frame, keep shading, and the image converges
+/// at their pace (issue 14 item 3) — bounded still by [`max_outstanding`] (the request
+/// ring, the memory grant and [`TARGET_SAMPLE_LATENCY`] when motion resumes).
+pub fn frame_requests(per_frame: usize, room: usize, still_frames: u32) -> usize {
+    if still_frames >= REST_AFTER_FRAMES {
+        room
+    } else {
+        per_frame.min(room)
+    }
+}
 /// Stage name of hole filling (not a column of paper Table 2).
 pub const STAGE_HOLES: &str = "holes";
 /// How often a waiting loop checks whether the viewer is gone.
@@ -98,6 +134,9 @@ pub(super) struct FrameLoop {
     /// Per object: the epoch of its latest move (0 = never moved).
     moved_at: Vec<u64>,
     last_move_epoch: u64,
+    /// Frames since the camera last changed or an object last moved (see
+    /// [`frame_requests`]).
+    still_frames: u32,
     /// Per object: its current object-to-world transform (for edge finding).
     transforms: Vec<glam::Affine3A>,
     /// Per object: the matrix taking its normals to world space now.
@@ -171,6 +210,8 @@ impl FrameLoop {
             epoch: 0,
             moved_at: vec![0; objects],
             last_move_epoch: 0,
+            // A new session is at rest until the camera or an object first moves.
+            still_frames: REST_AFTER_FRAMES,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
             lights: p.scene.lights.iter().map(light_bound).collect(),
@@ -226,12 +267,12 @@ impl FrameLoop {
                 // Keep taking samples (they stay valid and free the workers' answers) but
                 // make no frames and request nothing.
                 self.insert_samples();
-                self.wait_inputs(t0 + POLL);
+                self.wait_inputs(t0 + POLL, t0 + POLL);
                 continue;
             }
             self.frame(t0);
-            let period = Duration::from_secs_f64(1.0 / self.settings.max_fps);
-            self.wait_inputs(t0 + period);
+            let (soon, late) = frame_periods(&self.settings, self.still_frames);
+            self.wait_inputs(t0 + soon, t0 + late);
         }
     }
 
@@ -246,7 +287,8 @@ impl FrameLoop {
         let per_frame = self.settings.frame_budget(pixels);
         let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second());
         let outstanding = self.dispatcher.outstanding_requests() as usize;
-        let budget = per_frame.min(max_outstanding.saturating_sub(outstanding));
+        let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
+        self.still_frames = self.still_frames.saturating_add(1);
         let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
         self.picks.clear();
         if budget > 0 {
@@ -461,6 +503,9 @@ impl FrameLoop {
             match input {
                 Input::Camera(c) => match camera_from_wire(c) {
                     Ok(cam) => {
+                        if cam != self.camera {
+                            self.still_frames = 0;
+                        }
                         self.camera = cam;
                         self.cam_frame = cam.frame(self.width, self.height);
                     }
@@ -512,6 +557,7 @@ impl FrameLoop {
 
     fn move_object(&mut self, id: u32, t: glam::Affine3A) {
         self.epoch += 1;
+        self.still_frames = 0;
         if !self.dispatcher.set_epoch(self.epoch, vec![(id, t)]) {
             // The session is the dispatcher's only writer, so epochs always increase.
             tracing::error!(epoch = self.epoch, "dispatcher refused a new epoch");
@@ -641,17 +687,21 @@ impl FrameLoop {
         sent
     }
 
-    /// Sleeps until `deadline`, collecting inputs; returns early only when the viewer is gone.
-    fn wait_inputs(&mut self, deadline: Instant) {
+    /// Sleeps until `late`, collecting inputs — or, from `soon` on, until a camera change or
+    /// an object move is pending: a session pacing itself down at rest still answers the
+    /// first motion at the interactive rate. Returns early only for that or when the viewer
+    /// is gone.
+    fn wait_inputs(&mut self, soon: Instant, late: Instant) {
         loop {
             if self.out.is_closed() {
                 return;
             }
             let now = Instant::now();
-            if now >= deadline {
+            let motion = self.pending.iter().any(|i| matches!(i, Input::Camera(_) | Input::Move(_)));
+            if now >= late || (motion && now >= soon) {
                 return;
             }
-            let step = deadline.min(now + POLL);
+            let step = if motion { soon } else { late }.min(now + POLL);
             if self.inputs_open {
                 match self.inputs.recv_deadline(step) {
                     Ok(i) => self.pending.push(i),
@@ -699,5 +749,27 @@ mod tests {
         assert_eq!(max_outstanding(1000, 1_000.0), 1000, "never below one frame");
         assert_eq!(max_outstanding(1000, 1e9), 4000, "never above four frames");
         assert_eq!(max_outstanding(1000, f64::NAN), 4000);
+    }
+
+    #[test]
+    fn a_still_view_fills_the_room_in_flight_and_motion_keeps_the_budget() {
+        for still in 0..REST_AFTER_FRAMES {
+            assert_eq!(frame_requests(1000, 3500, still), 1000, "in motion: one frame's budget");
+            assert_eq!(frame_requests(1000, 300, still), 300, "in motion: no more than the room");
+        }
+        assert_eq!(frame_requests(1000, 3500, REST_AFTER_FRAMES), 3500, "at rest: all the room");
+        assert_eq!(frame_requests(1000, 0, u32::MAX), 0, "at rest, full: nothing");
+    }
+
+    #[test]
+    fn a_still_view_paces_down_to_the_rest_rate_but_never_above_the_cap() {
+        let s = SessionSettings { max_fps: 30.0, rest_fps: 10.0, ..Default::default() };
+        let (fast, slow) = (Duration::from_secs_f64(1.0 / 30.0), Duration::from_secs_f64(0.1));
+        assert_eq!(frame_periods(&s, 0), (fast, fast));
+        assert_eq!(frame_periods(&s, REST_AFTER_FRAMES - 1), (fast, fast));
+        assert_eq!(frame_periods(&s, REST_AFTER_FRAMES), (fast, slow));
+        let capped = SessionSettings { max_fps: 5.0, rest_fps: 10.0, ..Default::default() };
+        let five = Duration::from_secs_f64(0.2);
+        assert_eq!(frame_periods(&capped, u32::MAX), (five, five), "rest_fps above max_fps changes nothing");
     }
 }

@@ -41,6 +41,9 @@ pub struct SessionSettings {
     pub sparseness: f64,
     /// Frame-loop rate cap.
     pub max_fps: f64,
+    /// Frame-loop rate cap while the camera and the objects are still (see
+    /// `frame_loop::frame_periods`).
+    pub rest_fps: f64,
     /// Requests per batch sent to a worker.
     pub batch_size: u32,
     /// Age (frames) at which a sample's priority saturates.
@@ -59,6 +62,7 @@ impl Default for SessionSettings {
         SessionSettings {
             sparseness: 64.0,
             max_fps: 30.0,
+            rest_fps: 10.0,
             batch_size: 256,
             max_age_frames: 120.0,
             paused: false,
@@ -97,6 +101,9 @@ impl SessionSettings {
         }
         if let Some(v) = check_f64("max_fps", s.max_fps, MAX_FPS_RANGE)? {
             out.max_fps = v;
+        }
+        if let Some(v) = check_f64("rest_fps", s.rest_fps, MAX_FPS_RANGE)? {
+            out.rest_fps = v;
         }
         if let Some(v) = check_f64("max_age_frames", s.max_age_frames, MAX_AGE_RANGE)? {
             out.max_age_frames = v;
@@ -196,7 +203,8 @@ mod tests {
         let keep = s.with(&pb::Settings::default()).unwrap();
         assert_eq!(keep, s, "all-zero settings keep everything");
         let t = s.with(&pb::Settings { sparseness: 100.0, batch_size: 64, ..Default::default() }).unwrap();
-        assert_eq!((t.sparseness, t.batch_size, t.max_fps), (100.0, 64, 30.0));
+        assert_eq!((t.sparseness, t.batch_size, t.max_fps, t.rest_fps), (100.0, 64, 30.0, 10.0));
+        assert_eq!(t.with(&pb::Settings { rest_fps: 2.5, ..Default::default() }).unwrap().rest_fps, 2.5);
         let p = t.with(&pb::Settings { paused: true, set_paused: true, ..Default::default() }).unwrap();
         assert!(p.paused);
         assert!(p.with(&pb::Settings { paused: false, ..Default::default() }).unwrap().paused, "needs set_paused");
@@ -204,6 +212,8 @@ mod tests {
             pb::Settings { sparseness: -1.0, ..Default::default() },
             pb::Settings { sparseness: f64::NAN, ..Default::default() },
             pb::Settings { max_fps: 1e9, ..Default::default() },
+            pb::Settings { rest_fps: -1.0, ..Default::default() },
+            pb::Settings { rest_fps: f64::INFINITY, ..Default::default() },
             pb::Settings { max_age_frames: f64::INFINITY, ..Default::default() },
             pb::Settings { batch_size: 1_000_000, ..Default::default() },
         ] {
