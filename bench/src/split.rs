@@ -236,7 +236,9 @@ async fn measure(d: &Dispatcher, job: &mut Job<'_>, window: usize, time: Duratio
                 }
             }
         }
-        if !open && d.outstanding_requests() == 0 {
+        // Until every submitted sample is complete (not "nothing outstanding": the dispatcher
+        // settles a batch a moment before its answer is queued).
+        if !open && submitted.is_empty() {
             break;
         }
         let answer = tokio::time::timeout(Duration::from_secs(60), d.next_answer())
