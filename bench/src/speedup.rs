@@ -39,9 +39,10 @@ pub struct SpeedupArgs {
     /// executable).
     #[arg(long, value_name = "DIR")]
     pub data_dir: Option<PathBuf>,
-    /// Image width and height in pixels.
+    /// Image width in pixels.
     #[arg(long, default_value_t = 512)]
     pub width: u32,
+    /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     pub height: u32,
     /// Shader-worker processes (each session and full frame use all of them).

@@ -34,7 +34,9 @@ fn bx(p: &mut Parts, lo: Vec3, hi: Vec3) {
 }
 
 /// A lattice panel: `grid_plate` (a square in x–z, thickness along y) mapped onto the
-/// rectangle spanned by `u` and `v` from `corner`, `thickness` along `n`.
+/// rectangle spanned by `u` and `v` from `corner`, `thickness` along `n` (the panel's
+/// frame, one vector each, reads better than a struct built for every call).
+#[allow(clippy::too_many_arguments)]
 fn lattice(p: &mut Parts, cells: u32, bar: f32, corner: Vec3, u: Vec3, v: Vec3, n: Vec3, thickness: f32) {
     let plate = grid_plate(1.0, cells, bar, 1.0);
     // Plate coordinates: x and z in [-0.5, 0.5], y in [0, 1].

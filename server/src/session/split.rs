@@ -71,7 +71,7 @@ impl PartSums {
     /// Adds one arriving part (`s.part`) of a sample shaded at `epoch`.
     pub fn add(&mut self, epoch: u64, s: &pb::Sample) -> PartOutcome {
         if self.parts == 1 {
-            return if s.part == 0 { PartOutcome::Complete(s.clone(), epoch) } else { PartOutcome::Mismatch };
+            return if s.part == 0 { PartOutcome::Complete(*s, epoch) } else { PartOutcome::Mismatch };
         }
         if s.part >= self.parts {
             return PartOutcome::Mismatch;
@@ -80,7 +80,7 @@ impl PartSums {
         let rgb = pb::vec3_or_zero(&s.rgb).as_dvec3();
         let p = match self.pending.entry(s.id) {
             std::collections::hash_map::Entry::Vacant(v) => {
-                v.insert(Pending { got: bit, rgb, first: s.clone(), epoch });
+                v.insert(Pending { got: bit, rgb, first: *s, epoch });
                 return PartOutcome::Waiting;
             }
             std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
