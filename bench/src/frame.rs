@@ -66,6 +66,11 @@ pub struct SceneArgs {
     /// fov=DEG" (the viewer's --camera).
     #[arg(long, value_name = "KEYS", value_parser = edgepoint_viewer::camera_path::parse_camera_spec)]
     pub camera: Option<edgepoint_viewer::CameraSpec>,
+    /// How one pixel's shading is spread over the workers in the session (paper 004 §4.4):
+    /// `pixels` (default) or `lights:N` (each sample in N parts by lights, added by the
+    /// server before caching; the viewer's --split).
+    #[arg(long, value_name = "pixels|lights:N", default_value = "pixels")]
+    pub split: edgepoint_proto::split::SplitMode,
 }
 
 /// How fast a bench session samples and makes frames.
@@ -239,6 +244,7 @@ pub fn start_message(
         encoding: pb::FrameEncoding::Qoi as i32,
         settings: Some(settings),
         camera: camera.map(|c| c.to_wire()),
+        split: None,
     }
 }
 
@@ -253,7 +259,8 @@ pub fn run(args: FrameArgs) -> Result<()> {
     rt.block_on(async {
         let mut settings = args.pace.settings();
         args.reconstruction.apply(&mut settings);
-        let start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
+        let mut start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
+        start.split = a.split.to_wire();
         let t0 = Instant::now();
         let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
         let camera = camera_from_wire(started.camera.as_ref().context("server sent no camera")?);
@@ -332,6 +339,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             "worker_threads": a.worker_threads,
             "worker_nice": a.worker_nice,
             "shader": a.shader,
+            "split": a.split.to_string(),
             "frames": totals.len(),
             "session_start_ms": session_start_ms,
             "stages_median_ms": stage_order.iter().map(|s| (s.clone(), json!(median(&stage_ms[s])))).collect::<serde_json::Map<_, _>>(),

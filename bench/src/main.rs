@@ -35,6 +35,10 @@
 //! - `rays`: the worker's ray rate (Mrays/s, 1 and 2 threads) on a mesh's primary, shadow
 //!   and incoherent rays and its BVH build time, against the traversal before (and Embree
 //!   with the `embree` feature) in the same process, and the Embree figures.
+//! - `split`: split shading by lights against splitting by pixels on the same workers:
+//!   complete samples/s and request-to-sample latency under light and saturated load.
+//! - `speedup`: per scene and shader, an edge-and-point session's median frame time against
+//!   a full 1-spp frame shaded by the same workers (paper 000 Table 2's speedup).
 
 mod clock;
 mod converge;
@@ -52,6 +56,8 @@ mod quality;
 mod rays;
 mod requests;
 mod reference_cache;
+mod speedup;
+mod split;
 mod stats;
 mod throughput;
 
@@ -111,6 +117,14 @@ enum Cmd {
     /// The worker's ray rate on a mesh (primary, shadow, incoherent rays; 1 and 2 threads) and
     /// BVH build time, against the traversal before and Embree (feature `embree`).
     Rays(rays::RaysArgs),
+    /// Split shading (paper 004 §4.4) against splitting by pixels on the same workers:
+    /// complete samples per second and request-to-complete-sample latency, light and saturated load.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
+    Split(split::SplitArgs),
+    /// Speedup of an edge-and-point frame over a full 1-spp frame with the same shader and
+    /// workers, per scene and shader (paper 000 Table 2).
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
+    Speedup(speedup::SpeedupArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -132,6 +146,8 @@ fn main() -> anyhow::Result<()> {
         Cmd::Converge(a) => converge::run(a),
         Cmd::Fuzz(a) => fuzz::run(a),
         Cmd::Rays(a) => rays::run(a),
+        Cmd::Split(a) => split::run(a),
+        Cmd::Speedup(a) => speedup::run(a),
     }
 }
 

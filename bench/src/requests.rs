@@ -58,6 +58,7 @@ pub fn to_wire(id: u64, epoch: u64, shader: &str, params: &HashMap<String, f64>,
                 pixel_y: r.pixel[1],
                 origin: Some(r.origin.into()),
                 direction: Some(r.direction.into()),
+                ..Default::default()
             })
             .collect(),
     }

@@ -24,3 +24,4 @@ pub mod logging;
 pub mod metrics_http;
 pub mod net;
 pub mod shaders;
+pub mod split;

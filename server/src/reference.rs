@@ -122,7 +122,7 @@ pub fn pixel_batches<'a>(
                 let (x, y) = ((p % width) as u32, (p / width) as u32);
                 let (sx, sy) = position(x, y, (r % spp) as u32);
                 let (o, d) = cam.ray(sx, sy);
-                pb::ShadeRequest { id: r, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(d.into()) }
+                pb::ShadeRequest { id: r, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(d.into()), ..Default::default() }
             })
             .collect();
         pb::RequestBatch {

@@ -21,6 +21,7 @@ use crate::session::memory::{MemoryBudget, MemoryGrant, SessionMemory};
 use crate::session::{camera_to_wire, Input, Session, SessionParams, SessionSettings, DEFAULT_POINTS_PER_PIXEL};
 use crate::workers::{WorkerPool, DEFAULT_MAX_MESSAGE_BYTES};
 use edgepoint_proto as pb;
+use edgepoint_proto::split::SplitMode;
 use edgepoint_proto::auth::check_bearer;
 use edgepoint_proto::renderer_server::{Renderer, RendererServer};
 use edgepoint_proto::viewer_msg::Msg as ViewerIn;
@@ -218,6 +219,7 @@ struct StartChecked {
     encoding: pb::FrameEncoding,
     shader: String,
     settings: SessionSettings,
+    split: SplitMode,
 }
 
 fn check_start(s: &pb::Start) -> Result<StartChecked, Status> {
@@ -242,7 +244,8 @@ fn check_start(s: &pb::Start) -> Result<StartChecked, Status> {
     if s.scene.is_none() {
         return Err(invalid("start.scene is missing: name a built-in or send files"));
     }
-    Ok(StartChecked { encoding, shader, settings })
+    let split = SplitMode::from_wire(s.split.as_ref()).map_err(|e| invalid(format!("start.split: {e}")))?;
+    Ok(StartChecked { encoding, shader, settings, split })
 }
 
 fn started_msg(id: &str, hash: &str, scene: &edgepoint_scene::Scene, camera: &edgepoint_scene::Camera, workers: usize) -> pb::ServerMsg {
@@ -375,6 +378,7 @@ impl RendererService {
             seed,
             edge_index: shared.edge_index,
             memory: Some(memory),
+            split: checked.split,
         };
         let state = self.state.clone();
         let on_end: Box<dyn FnOnce() + Send> = Box::new(move || {
@@ -524,6 +528,11 @@ mod tests {
         assert!(e.message().contains("unknown shader 'phong'") && e.message().contains("direct, glossy, gi"), "{}", e.message());
         // Issue 14: the new shaders' parameters are checked too.
         assert!(check_start(&pb::Start { shader: "gi".into(), ..start() }).is_ok());
+        let split = |by, parts| Some(pb::Split { by, parts });
+        assert_eq!(check_start(&pb::Start { split: split(1, 3), ..start() }).unwrap().split, SplitMode::Lights(3));
+        assert!(check_start(&pb::Start { split: split(1, 65), ..start() }).unwrap_err().message().contains("start.split"));
+        assert!(check_start(&pb::Start { split: split(1, 0), ..start() }).unwrap_err().message().contains("not 0"));
+        assert!(check_start(&pb::Start { split: split(9, 2), ..start() }).unwrap_err().message().contains("SplitBy"));
         let params = HashMap::from([("max_depth".to_string(), 0.0)]);
         assert!(check_start(&pb::Start { shader: "glossy".into(), shader_params: params, ..start() }).unwrap_err().message().contains("max_depth"));
     }

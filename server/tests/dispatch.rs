@@ -115,6 +115,7 @@ impl ShaderWorker for ScriptedWorker {
                                 triangle: 0,
                                 local_position: q.origin,
                                 local_normal: Some(Vec3::Z.into()),
+                                part: q.part,
                             })
                             .collect();
                         let out = pb::SampleBatch { batch_id: b.batch_id, epoch: b.epoch, samples, shade_ms: 0.1, ..Default::default() };
@@ -164,6 +165,7 @@ fn batch(id: u64, epoch: u64, n: u64) -> pb::RequestBatch {
                 pixel_y: 0,
                 origin: Some(Vec3::new(i as f32, 0.0, 0.0).into()),
                 direction: Some(Vec3::NEG_Z.into()),
+                ..Default::default()
             })
             .collect(),
         ..Default::default()

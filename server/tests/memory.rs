@@ -201,6 +201,7 @@ fn a_running_session_stays_within_its_estimate() {
                 seed: 1,
                 edge_index: EdgeIndexSlot::default(),
                 memory: None,
+                split: Default::default(),
             };
             let session = Session::start(params, pool.open(source, hash), None).unwrap();
             let out = session.output();

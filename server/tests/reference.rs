@@ -35,7 +35,7 @@ async fn one_spp_is_the_pixel_centre_ray_whatever_the_batching() {
         .map(|p| {
             let (x, y) = (p % wd, p / wd);
             let (o, dir) = f.ray(x as f32 + 0.5, y as f32 + 0.5);
-            pb::ShadeRequest { id: p as u64, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(dir.into()) }
+            pb::ShadeRequest { id: p as u64, pixel_x: x, pixel_y: y, origin: Some(o.into()), direction: Some(dir.into()), ..Default::default() }
         })
         .collect();
     let batch = pb::RequestBatch { batch_id: 1, epoch: 0, shader: "direct".into(), requests, seed: 5, ..Default::default() };

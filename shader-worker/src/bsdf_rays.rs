@@ -13,6 +13,7 @@ use crate::bvh::Instances;
 use crate::loaded::{AreaLight, LoadedScene, PreparedLight};
 use crate::rng::Rng;
 use crate::surface::ShadingPoint;
+use edgepoint_proto::split::Part;
 use edgepoint_scene::material::Scatter;
 use glam::Vec3;
 
@@ -70,11 +71,15 @@ pub(crate) fn hit_area_light(a: &AreaLight, origin: Vec3, dir: Vec3) -> Option<(
     None
 }
 
-/// The closest area light along a ray, unoccluded: (light, its radiance-carrying distance²
-/// and cosine). The shadow ray stops short of the light as the light samples' do, so a
-/// luminaire object lying on the light does not block it.
-fn visible_light<'a>(scene: &'a LoadedScene, inst: &Instances, origin: Vec3, dir: Vec3) -> Option<(&'a AreaLight, f32, f32)> {
-    let (a, t, cos_l) = nearest_area_light(scene, origin, dir)?;
+/// The closest area light along a ray, unoccluded, if `part` shades it: (light, its
+/// radiance-carrying distance² and cosine). The shadow ray stops short of the light as the
+/// light samples' do, so a luminaire object lying on the light does not block it; it is
+/// cast only for the part that owns the light (split shading counts each light once).
+fn visible_light<'a>(scene: &'a LoadedScene, inst: &Instances, origin: Vec3, dir: Vec3, part: Part) -> Option<(&'a AreaLight, f32, f32)> {
+    let (i, a, t, cos_l) = nearest_area_light_index(scene, origin, dir)?;
+    if !part.owns(i) {
+        return None;
+    }
     if inst.occluded(&scene.bvh, origin, dir, 0.0, t * (1.0 - 1e-4)).is_some() {
         return None;
     }
@@ -84,12 +89,17 @@ fn visible_light<'a>(scene: &'a LoadedScene, inst: &Instances, origin: Vec3, dir
 /// The nearest area light's emitting side along a ray, occlusion not tested: (light,
 /// distance, cosine at the light).
 pub(crate) fn nearest_area_light(scene: &LoadedScene, origin: Vec3, dir: Vec3) -> Option<(&AreaLight, f32, f32)> {
-    let mut best: Option<(&AreaLight, f32, f32)> = None;
-    for l in &scene.lights {
+    nearest_area_light_index(scene, origin, dir).map(|(_, a, t, c)| (a, t, c))
+}
+
+/// [`nearest_area_light`] with the light's index in the scene's light list.
+fn nearest_area_light_index(scene: &LoadedScene, origin: Vec3, dir: Vec3) -> Option<(usize, &AreaLight, f32, f32)> {
+    let mut best: Option<(usize, &AreaLight, f32, f32)> = None;
+    for (i, l) in scene.lights.iter().enumerate() {
         if let PreparedLight::Area(a) = l {
             if let Some((t, cos_l)) = hit_area_light(a, origin, dir) {
-                if best.is_none_or(|b| t < b.1) {
-                    best = Some((a, t, cos_l));
+                if best.is_none_or(|b| t < b.2) {
+                    best = Some((i, a, t, cos_l));
                 }
             }
         }
@@ -100,8 +110,10 @@ pub(crate) fn nearest_area_light(scene: &LoadedScene, origin: Vec3, dir: Vec3) -
 /// Radiance reaching the viewer from area lights through BSDF-sampled directions.
 /// `n`: the face normal on the viewer's side (rays below it would enter the surface);
 /// `samples`: the light samples per area light (as many BSDF samples are drawn for rough
-/// lobes, for the power heuristic's equal counts).
-pub fn area_light_via_bsdf(scene: &LoadedScene, inst: &Instances, sp: &ShadingPoint, origin: Vec3, n: Vec3, samples: u32, rng: &mut Rng) -> Vec3 {
+/// lobes, for the power heuristic's equal counts); `part`: only the lights it owns count
+/// (every part draws the same directions, so the parts' sum is the whole estimate).
+#[allow(clippy::too_many_arguments)]
+pub fn area_light_via_bsdf(scene: &LoadedScene, inst: &Instances, sp: &ShadingPoint, origin: Vec3, n: Vec3, samples: u32, part: Part, rng: &mut Rng) -> Vec3 {
     let mut rgb = Vec3::ZERO;
     if sp.bsdf.has_delta() {
         // u.x = 0 picks every model's reflection lobe; its expected contribution is
@@ -109,7 +121,7 @@ pub fn area_light_via_bsdf(scene: &LoadedScene, inst: &Instances, sp: &ShadingPo
         if let Some(s) = sp.bsdf.sample(sp.wo, Vec3::new(0.0, 0.5, 0.5)) {
             let wi = sp.frame.to_world(s.wi);
             if s.delta && wi.dot(n) > 0.0 {
-                if let Some((a, _, _)) = visible_light(scene, inst, origin, wi) {
+                if let Some((a, _, _)) = visible_light(scene, inst, origin, wi, part) {
                     rgb += s.value * s.wi.z.abs() * a.radiance;
                 }
             }
@@ -124,7 +136,7 @@ pub fn area_light_via_bsdf(scene: &LoadedScene, inst: &Instances, sp: &ShadingPo
             if s.delta || wi.dot(n) <= 0.0 {
                 continue;
             }
-            if let Some((a, d2, cos_l)) = visible_light(scene, inst, origin, wi) {
+            if let Some((a, d2, cos_l)) = visible_light(scene, inst, origin, wi, part) {
                 let w = power_heuristic(s.pdf, light_pdf(a, d2, cos_l));
                 sum += s.weight() * a.radiance * w;
             }

@@ -19,4 +19,4 @@ pub mod triples;
 pub use bvh::{BvhShape, Hit, Instances, SceneBvh, Simd};
 pub use loaded::LoadedScene;
 pub use triples::sample_triples;
-pub use shader::{shade_batch, DirectParams, GiParams, GlossyParams, HybridParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};
+pub use shader::{shade_batch, shade_batch_parts, Part, DirectParams, GiParams, GlossyParams, HybridParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

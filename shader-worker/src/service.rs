@@ -12,7 +12,7 @@
 //! re-issues whatever it still had queued here to other workers and nothing is lost.
 use crate::loaded::LoadedScene;
 use crate::metrics::WorkerMetrics;
-use crate::shader::{shade_batch, RayRequest, ShaderSpec, SHADERS};
+use crate::shader::{shade_batch_parts, Part, RayRequest, ShaderSpec, SHADERS};
 use crate::Instances;
 use edgepoint_proto::shader_worker_server::ShaderWorker;
 use edgepoint_proto::{self as pb, shade_in, shade_out};
@@ -138,8 +138,11 @@ fn vec3(v: &Option<pb::Vec3>, what: &str, id: u64) -> Result<Vec3, Status> {
     Ok(v)
 }
 
-fn requests_from_wire(b: &pb::RequestBatch) -> Result<Vec<RayRequest>, Status> {
-    b.requests
+/// A batch's rays and, when any request is a part of a split sample, every request's part
+/// (empty otherwise: the common case costs nothing).
+fn requests_from_wire(b: &pb::RequestBatch) -> Result<(Vec<RayRequest>, Vec<Part>), Status> {
+    let reqs = b
+        .requests
         .iter()
         .map(|r| {
             let direction = vec3(&r.direction, "direction", r.id)?;
@@ -148,7 +151,16 @@ fn requests_from_wire(b: &pb::RequestBatch) -> Result<Vec<RayRequest>, Status> {
             }
             Ok(RayRequest { id: r.id, pixel: [r.pixel_x, r.pixel_y], origin: vec3(&r.origin, "origin", r.id)?, direction })
         })
-        .collect()
+        .collect::<Result<Vec<_>, Status>>()?;
+    if b.requests.iter().all(|r| r.parts <= 1 && r.part == 0) {
+        return Ok((reqs, Vec::new()));
+    }
+    let parts = b
+        .requests
+        .iter()
+        .map(|r| Part::from_wire(r.part, r.parts).map_err(|m| Status::invalid_argument(format!("request {}: {m}", r.id))))
+        .collect::<Result<Vec<_>, Status>>()?;
+    Ok((reqs, parts))
 }
 
 fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64) -> pb::SampleBatch {
@@ -160,6 +172,7 @@ fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64)
             .into_iter()
             .map(|s| match s.hit {
                 Some(h) => pb::Sample {
+                    part: 0,
                     id: s.id,
                     hit: true,
                     position: Some(h.position.into()),
@@ -173,6 +186,9 @@ fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64)
                 },
                 None => pb::Sample { id: s.id, hit: false, rgb: Some(s.rgb.into()), object_id: u32::MAX, ..Default::default() },
             })
+            .zip(&b.requests)
+            // Samples come in request order: each echoes its request's part.
+            .map(|(s, r)| pb::Sample { part: r.part, ..s })
             .collect(),
         triples: out.triples.into_iter().map(|[light, blocker, receiver]| pb::Triple { light, blocker, receiver }).collect(),
         visible_objects: out.visible,
@@ -361,7 +377,7 @@ impl ShaderWorker for WorkerService {
                                 break;
                             }
                         };
-                        let reqs = match requests_from_wire(&b) {
+                        let (reqs, parts) = match requests_from_wire(&b) {
                             Ok(r) => r,
                             Err(s) => {
                                 fail(s).await;
@@ -377,7 +393,7 @@ impl ShaderWorker for WorkerService {
                             let t = Instant::now();
                             m.shading.inc();
                             let out = tokio::task::spawn_blocking(move || {
-                                let out = pool.install(|| shade_batch(&scene, &inst, &spec, b.seed, &reqs));
+                                let out = pool.install(|| shade_batch_parts(&scene, &inst, &spec, b.seed, &reqs, &parts));
                                 samples_to_wire(&b, out, t.elapsed().as_secs_f64() * 1e3)
                             })
                             .await;

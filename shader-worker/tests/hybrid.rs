@@ -206,7 +206,7 @@ fn parts_add_up_to_the_whole_sample() {
         let set = loaded.vpls.get(&loaded, &inst, p.vpl_settings());
         let nl = loaded.lights.len();
         let parts: Vec<Part> = (0..3)
-            .map(|i| Part { lights: (i * nl / 3)..((i + 1) * nl / 3), vpls: (i * set.vpls.len() / 3)..((i + 1) * set.vpls.len() / 3), rest: i == 0 })
+            .map(|i| Part { lights: (i * nl / 3)..((i + 1) * nl / 3), vpls: (i * set.vpls.len() / 3)..((i + 1) * set.vpls.len() / 3), rest: i == 0, light_part: edgepoint_proto::split::Part::WHOLE })
             .collect();
         let mut worst = 0.0f32;
         for r in &reqs {

@@ -132,6 +132,13 @@ struct Args {
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
     shader_param: Vec<(String, f64)>,
 
+    /// How one pixel's shading is spread over the workers (paper 004 §4.4): `pixels`
+    /// (default: each request shades a whole pixel) or `lights:N` (each sample in N parts,
+    /// 1-64, shaded by any workers at once: part i takes the lights with index i mod N, part
+    /// 0 also emission, ambient and indirect light; the server adds the parts before caching).
+    #[arg(long, value_name = "pixels|lights:N", default_value = "pixels")]
+    split: edgepoint_proto::split::SplitMode,
+
     /// Encoding of the frames the server sends. Default: qoi, or linear when --format exr,
     /// --tev, --exposure or --tonemap filmic need the radiance.
     #[arg(long, value_enum)]
@@ -431,6 +438,7 @@ fn run(args: Args) -> Result<()> {
         encoding: encoding as i32,
         settings,
         camera: camera.map(|c| c.to_wire()),
+        split: args.split.to_wire(),
     };
     let token = match (&args.token, &args.token_file) {
         (Some(t), _) => Some(t.trim().to_string()),

@@ -28,7 +28,7 @@ fn help_mentions_every_flag() {
         "--orbit-elevation", "--orbit-start", "--camera", "--camera-path", "--loop-path", "--record-path",
         "--screenshot-dir",
         "--move-object", "--sparseness",
-        "--max-fps", "--quiet", "--stats-stdout", "--start-timeout-secs",
+        "--max-fps", "--quiet", "--stats-stdout", "--start-timeout-secs", "--split",
     ] {
         assert!(help.contains(&format!("{flag} ")) || help.contains(&format!("{flag}\n")), "--help lacks {flag}:\n{help}");
     }

@@ -1,6 +1,6 @@
 //! Built-in scenes: the Cornell box, and scenes after paper 000's (§7.1, Figures 7, 9, 12,
-//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`; `materials`, the demo of the
-//! scattering models; `glossy-bunny`, the `glossy` shader's scene; and `cornell-glass`
+//! 13): `chains`, `torus-capsule`, `grid-dragon`, `rooms`, `mackintosh`; `materials`, the demo
+//! of the scattering models; `glossy-bunny`, the `glossy` shader's scene; and `cornell-glass`
 //! (paper 004 Fig. 10), the `hybrid` shader's.
 //!
 //! Most are procedural. `grid-dragon` (and `glossy-bunny`) is built around the shared Stanford dragon, which is
@@ -15,6 +15,7 @@ mod cornell;
 mod cornell_glass;
 mod glossy_bunny;
 mod grid_dragon;
+mod mackintosh;
 mod materials;
 mod rooms;
 pub mod shapes;
@@ -35,6 +36,7 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("grid-dragon", "a grid casting a shadow pattern on the Stanford dragon, point light (paper Fig. 13; needs dragon/dragon_vrip.ply)"),
     ("rooms", "six furnished rooms with doorways, one ceiling area light each (paper Fig. 12)"),
     ("glossy-bunny", "the Stanford bunny in rough gold on polished plastic before a mirror, area and point light: for the glossy shader (needs bunny/bun_zipper.ply)"),
+    ("mackintosh", "a white room after Mackintosh: latticed window with daylight, high-back chairs, tea-stand, lattice screen, hanging lamp; three lights, fine geometry, for the gi shader (paper Fig. 10-11)"),
     ("materials", "a sphere of each material (Lambert, plastic, metal, glass; smooth and rough) under an area and a point light"),
 ];
 
@@ -61,6 +63,7 @@ pub fn load(name: &str) -> Result<Scene, String> {
         "torus-capsule" => Ok(torus_capsule::torus_capsule()),
         "rooms" => Ok(rooms::rooms()),
         "materials" => Ok(materials::materials()),
+        "mackintosh" => Ok(mackintosh::mackintosh()),
         _ if BUILTINS.iter().any(|b| b.0 == name) => Err(format!(
             "built-in scene '{name}' is made from the data file(s) {} and must be loaded with them: \
              the viewer and the bench find them in the shared data directory (--data-dir, the {} \

@@ -14,6 +14,7 @@
 use super::feedback::ShadingFeedback;
 use super::output::SessionOutput;
 use super::requests::{build_batches, BatchSpec, RequestRing};
+use super::split::{PartOutcome, PartSums};
 use crate::rng::mix64;
 use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve_move, Reconstruction, SessionSettings};
 use super::{Input, SessionParams};
@@ -117,6 +118,8 @@ pub struct SessionCounters {
     pub nonfinite: u64,
     /// Batches the dispatcher refused (queue full).
     pub refused_batches: u64,
+    /// Split samples dropped with some parts missing (their request forgotten).
+    pub parts_forgotten: u64,
 }
 
 pub(super) struct FrameLoop {
@@ -161,6 +164,8 @@ pub(super) struct FrameLoop {
     sampler: Sampler,
     dispatcher: Dispatcher,
     ring: RequestRing,
+    /// Split shading: the parts of samples received so far (one part: pass-through).
+    split: PartSums,
     pub feedback: ShadingFeedback,
     times: StageTimes,
     encoder: FrameEncoder,
@@ -232,6 +237,7 @@ impl FrameLoop {
             sampler: Sampler::new(p.width, p.height, p.seed),
             dispatcher,
             ring,
+            split: PartSums::new(p.split.parts()),
             feedback: ShadingFeedback::new(objects),
             times: StageTimes::new(),
             encoder: FrameEncoder::new(),
@@ -285,8 +291,10 @@ impl FrameLoop {
         let t = Instant::now();
         let pixels = self.width as usize * self.height as usize;
         let per_frame = self.settings.frame_budget(pixels);
-        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second());
-        let outstanding = self.dispatcher.outstanding_requests() as usize;
+        // The dispatcher counts parts; the budget counts samples (pixels shaded whole).
+        let parts = self.split.parts() as f64;
+        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second() / parts);
+        let outstanding = self.dispatcher.outstanding_requests() as usize / parts as usize;
         let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
         self.still_frames = self.still_frames.saturating_add(1);
         let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
@@ -587,9 +595,27 @@ impl FrameLoop {
         let mut inserted = 0u32;
         let objects = self.moved_at.len() as u32;
         let lights = self.scene.lights.len();
+        let split = self.split.parts() > 1;
         for b in &self.answers {
             self.feedback.record(b, lights);
             for s in &b.samples {
+                // A split sample enters the cache once all its parts are in, summed.
+                let whole;
+                let s = if split {
+                    match self.split.add(b.epoch, s) {
+                        PartOutcome::Complete(w, _) => {
+                            whole = w;
+                            &whole
+                        }
+                        PartOutcome::Waiting => continue,
+                        PartOutcome::Duplicate | PartOutcome::Mismatch => {
+                            self.counters.unmatched += 1;
+                            continue;
+                        }
+                    }
+                } else {
+                    s
+                };
                 let Some(info) = self.ring.get(s.id) else {
                     self.counters.unmatched += 1;
                     continue;
@@ -645,6 +671,12 @@ impl FrameLoop {
                 }
             }
         }
+        if split {
+            // Parts of requests the ring forgot (or whose other part was given up) never
+            // complete: drop their partial sums.
+            let ring = &self.ring;
+            self.counters.parts_forgotten += self.split.forget(|id| ring.get(id).is_some()) as u64;
+        }
         self.counters.samples_inserted += inserted as u64;
         self.counters.averaged = self.cache.averaged();
         inserted
@@ -670,6 +702,7 @@ impl FrameLoop {
             shader: &self.shader,
             params: &self.shader_params,
             batch_size: self.settings.batch_size as usize,
+            parts: self.split.parts(),
         };
         build_batches(&self.picks, &self.cam_frame, &mut self.ring, &spec, &mut self.next_batch_id, &mut self.seed, &mut self.batches);
         let mut sent = 0u32;

@@ -20,6 +20,7 @@ mod progress;
 pub mod pick;
 mod requests;
 mod settings;
+pub mod split;
 
 pub use edge_source::{EdgeIndexSlot, EdgeSourceStats, SessionEdges, TripleSet};
 pub use feedback::{ObjectSeen, ShadingFeedback, TripleKey, TripleSeen};
@@ -73,6 +74,8 @@ pub struct SessionParams {
     /// The session's share of the server's memory budget (`None`: unlimited); a settings
     /// change that needs more than it can grow to is refused.
     pub memory: Option<memory::MemoryGrant>,
+    /// How each pixel's shading is spread over the workers (by pixels: whole samples).
+    pub split: edgepoint_proto::split::SplitMode,
 }
 
 /// Default Render Cache size per pixel (DESIGN.md: "a small multiple of the pixel count").
@@ -119,7 +122,7 @@ impl Session {
             let c = fl.counters;
             tracing::info!(session = %id, frames = c.frames, samples_inserted = c.samples_inserted, averaged = c.averaged,
                 samples_requested = c.samples_requested, carried = c.carried, stale_dropped = c.stale_dropped,
-                unmatched = c.unmatched, nonfinite = c.nonfinite, refused_batches = c.refused_batches,
+                unmatched = c.unmatched, parts_forgotten = c.parts_forgotten, nonfinite = c.nonfinite, refused_batches = c.refused_batches,
                 triples = fl.feedback.triples.len(), "session ended");
             drop(fl);
             drop(guard);

@@ -92,6 +92,8 @@ pub struct BatchSpec<'a> {
     pub shader: &'a str,
     pub params: &'a std::collections::HashMap<String, f64>,
     pub batch_size: usize,
+    /// Parts per sample (split shading, paper 004 §4.4; 1: whole pixels).
+    pub parts: u32,
 }
 
 /// Turns the pixels the sampler chose into ray request batches through `cam`, recording
@@ -102,6 +104,11 @@ pub struct BatchSpec<'a> {
 /// first to arrive then already cover the whole frame: a session's first frame is coarse
 /// but complete instead of a band of the top rows, and after a fast move the newly exposed
 /// regions everywhere get their first samples at once.
+///
+/// Split shading (`spec.parts` > 1): each batch goes out as `parts` sibling batches, one
+/// per part, with the same requests, ids and seed (so the parts draw the random numbers of
+/// one whole shading and add up to it) and consecutive batch ids; siblings are queued one
+/// after another so that different workers take them at the same time.
 pub fn build_batches(
     picks: &[PixelRequest],
     cam: &CameraFrame,
@@ -126,19 +133,40 @@ pub fn build_batches(
                     pixel_y: p.y,
                     origin: Some(origin.into()),
                     direction: Some(dir.into()),
+                    ..Default::default()
                 }
             })
             .collect();
         *seed = mix64(*seed);
-        out.push(pb::RequestBatch {
+        let whole = pb::RequestBatch {
             batch_id: *next_batch_id,
             epoch: spec.epoch,
             shader: spec.shader.to_string(),
             params: spec.params.clone(),
             requests,
             seed: *seed,
-        });
+        };
         *next_batch_id += 1;
+        if spec.parts <= 1 {
+            out.push(whole);
+            continue;
+        }
+        for part in 1..spec.parts {
+            let mut b = whole.clone();
+            b.batch_id = *next_batch_id;
+            *next_batch_id += 1;
+            for r in &mut b.requests {
+                (r.part, r.parts) = (part, spec.parts);
+            }
+            out.push(b);
+        }
+        let mut first = whole;
+        for r in &mut first.requests {
+            (r.part, r.parts) = (0, spec.parts);
+        }
+        // Part 0 (emission, ambient, indirect light: usually the largest) first.
+        let at = out.len() - (spec.parts as usize - 1);
+        out.insert(at, first);
     }
 }
 
@@ -178,7 +206,7 @@ mod tests {
         let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: i % 16, sx: i as f32 + 0.25, sy: (i % 16) as f32 + 0.75, point: i }).collect();
         let mut ring = RequestRing::new(64);
         let params = std::collections::HashMap::from([("ambient".to_string(), 0.1)]);
-        let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4 };
+        let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4, parts: 1 };
         let (mut next, mut seed, mut out) = (7u64, 1u64, Vec::new());
         build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
         assert_eq!(out.iter().map(|b| b.requests.len()).collect::<Vec<_>>(), vec![4, 3, 3]);
@@ -201,7 +229,35 @@ mod tests {
                 let (sx, sy, _) = f.project(o + d * 2.0).unwrap();
                 assert!((sx - p.sx).abs() < 1e-3 && (sy - p.sy).abs() < 1e-3);
                 assert!((info.dir - d).length() < 1e-6);
+                assert_eq!((r.part, r.parts), (0, 0), "whole pixels");
             }
         }
+    }
+
+    #[test]
+    fn split_batches_are_siblings_with_one_seed_and_every_part() {
+        let cam = Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 };
+        let f = cam.frame(32, 16);
+        let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: 0, sx: i as f32 + 0.5, sy: 0.5, point: u32::MAX }).collect();
+        let params = std::collections::HashMap::new();
+        let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: 4, parts: 3 };
+        let (mut ring, mut next, mut seed, mut out) = (RequestRing::new(64), 0u64, 1u64, Vec::new());
+        build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
+        assert_eq!(out.len(), 9, "three batches of picks, three parts each");
+        assert_eq!(out.iter().map(|b| b.batch_id).collect::<Vec<_>>(), (0..9).collect::<Vec<_>>());
+        for (g, group) in out.chunks(3).enumerate() {
+            for (i, b) in group.iter().enumerate() {
+                assert_eq!(b.seed, group[0].seed, "one seed per sample's parts");
+                assert!(b.requests.iter().all(|r| (r.part, r.parts) == (i as u32, 3)), "group {g} batch {i}");
+                let ids = |b: &pb::RequestBatch| b.requests.iter().map(|r| r.id).collect::<Vec<_>>();
+                assert_eq!(ids(b), ids(&group[0]));
+            }
+            assert_ne!(group[0].seed, out[(g + 1) % 3 * 3].seed);
+        }
+        assert_eq!(out.iter().map(|b| b.requests.len()).sum::<usize>(), 30);
+        let mut remembered: Vec<u32> = (0..10).map(|id| ring.get(id).unwrap().pixel[0]).collect();
+        remembered.sort_unstable();
+        assert_eq!(remembered, (0..10).collect::<Vec<_>>(), "each pick remembered once");
+        assert!(ring.get(10).is_none());
     }
 }

@@ -5,7 +5,8 @@
 //! lobes also sample the BSDF toward area lights (multiple importance sampling) and delta
 //! lobes see area lights only that way ([`crate::bsdf_rays`]); point lights reach every
 //! non-delta lobe. Transmission receives no direct light (a light behind a glass surface is
-//! behind the object the surface belongs to).
+//! behind the object the surface belongs to). Split shading: a part samples its own lights
+//! ([`Part::owns`]); emission and ambient belong to part 0.
 use super::hit::{primary, Surface};
 use super::lights::{add_direct_light, LightQuery};
 use super::{finish, RayRequest, Shaded};
@@ -13,6 +14,7 @@ use crate::bsdf_rays::area_light_via_bsdf;
 use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
 use crate::rng::Rng;
+use edgepoint_proto::split::Part;
 use glam::Vec3;
 use std::collections::HashMap;
 
@@ -38,29 +40,32 @@ impl Default for DirectParams {
 /// so the light samples (and the triples they find) do not depend on the material.
 pub(crate) const BSDF_STREAM: u64 = 0x6273_6466_5f72_6179;
 
-pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &DirectParams, seed: u64, r: &RayRequest) -> Shaded {
-    let s = match primary(scene, inst, r) {
+pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &DirectParams, seed: u64, r: &RayRequest, part: Part) -> Shaded {
+    let s = match primary(scene, inst, r, part) {
         Ok(s) => s,
         Err(done) => return done,
     };
     let mut triples = Vec::new();
-    let mut rgb = s.emitted();
+    let mut rgb = if part.shades_unsplit_terms() { s.emitted() } else { Vec3::ZERO };
     let mut rng = Rng::new(seed, r.id);
     let mut bsdf_rng = Rng::new(seed ^ BSDF_STREAM, r.id);
-    add_lit(scene, inst, &s, p, &mut rng, &mut bsdf_rng, Some(&mut triples), &mut rgb);
+    add_lit(scene, inst, &s, p, part, &mut rng, &mut bsdf_rng, Some(&mut triples), &mut rgb);
     finish(r.id, Some(s.info()), rgb, triples)
 }
 
 /// What `direct` adds at a surface: sampled direct light, area lights through the BSDF
-/// (delta and rough lobes), and the ambient term. `glossy` adds the same at every bounce.
+/// (delta and rough lobes), and the ambient term; of a split sample, `part`'s lights (and
+/// the ambient term in part 0). `glossy` adds the same at every bounce.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn add_lit(scene: &LoadedScene, inst: &Instances, s: &Surface, p: &DirectParams, rng: &mut Rng, bsdf_rng: &mut Rng, triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
-    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: p.shadow_rays, bsdf_per_light_sample: 1.0 };
+pub(crate) fn add_lit(scene: &LoadedScene, inst: &Instances, s: &Surface, p: &DirectParams, part: Part, rng: &mut Rng, bsdf_rng: &mut Rng, triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: p.shadow_rays, bsdf_per_light_sample: 1.0, part };
     add_direct_light(scene, inst, &q, rng, triples, rgb);
     if s.sp.scatters {
         if s.sp.bsdf_has_delta() || s.sp.is_glossy() {
-            *rgb += area_light_via_bsdf(scene, inst, &s.sp, s.origin, s.n, p.shadow_rays, bsdf_rng);
+            *rgb += area_light_via_bsdf(scene, inst, &s.sp, s.origin, s.n, p.shadow_rays, part, bsdf_rng);
         }
-        *rgb += s.sp.diffuse_albedo() * scene.scene.ambient * p.ambient;
+        if part.shades_unsplit_terms() {
+            *rgb += s.sp.diffuse_albedo() * scene.scene.ambient * p.ambient;
+        }
     }
 }

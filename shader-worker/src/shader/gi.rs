@@ -12,6 +12,9 @@
 //! into a new record from `cache_rays` hemisphere paths when no record is valid there.
 //! Only first hits use the cache (the paper's shader caches what the camera sees; deeper
 //! vertices are path-traced).
+//!
+//! Split shading: a part samples its own lights at the first hit; the rest of the path
+//! (and the irradiance cache) is part 0's.
 use super::hit::{primary, Surface};
 use super::irradiance_cache::{gather, CacheSettings, Ticket};
 use super::lights::{add_direct_light, LightQuery};
@@ -21,6 +24,7 @@ use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
 use crate::rng::Rng;
 use edgepoint_scene::material::{Scatter, Scattering};
+use edgepoint_proto::split::Part;
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
@@ -57,8 +61,8 @@ struct Ctx<'a> {
     p: &'a GiParams,
 }
 
-pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GiParams, cache: Option<Ticket>, seed: u64, r: &RayRequest) -> Shaded {
-    let s = match primary(scene, inst, r) {
+pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GiParams, cache: Option<Ticket>, seed: u64, r: &RayRequest, part: Part) -> Shaded {
+    let s = match primary(scene, inst, r, part) {
         Ok(s) => s,
         Err(done) => return done,
     };
@@ -66,25 +70,29 @@ pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GiParams, cache: 
     let mut triples = Vec::new();
     let mut light_rng = Rng::new(seed, r.id);
     let mut path_rng = Rng::new(seed ^ PATH_STREAM, r.id);
-    let mut rgb = s.emitted();
     let info = s.info();
-    rgb += scattered(&ctx, s, 0, cache, Some(&mut triples), &mut light_rng, &mut path_rng);
+    let mut rgb = if part.shades_unsplit_terms() { s.emitted() } else { Vec3::ZERO };
+    rgb += scattered(&ctx, s, 0, part, cache, Some(&mut triples), &mut light_rng, &mut path_rng);
     finish(r.id, Some(info), rgb, triples)
 }
 
 /// Radiance scattered toward the viewer at `s`, vertex `depth` of a path (the camera's hit
-/// is vertex 0), without `s`'s own emission. `cache` and `triples` apply to vertex 0 only.
-fn scattered<'a>(ctx: &Ctx<'a>, mut s: Surface<'a>, mut depth: u32, cache: Option<Ticket>, mut triples: Option<&mut Vec<[u32; 3]>>, light_rng: &mut Rng, rng: &mut Rng) -> Vec3 {
+/// is vertex 0), without `s`'s own emission. `cache` and `triples` apply to vertex 0 only,
+/// and so does `part`: a split sample's part samples its own lights at vertex 0 and part 0
+/// alone goes on along the path (with every light at the deeper vertices).
+#[allow(clippy::too_many_arguments)]
+fn scattered<'a>(ctx: &Ctx<'a>, mut s: Surface<'a>, mut depth: u32, part: Part, cache: Option<Ticket>, mut triples: Option<&mut Vec<[u32; 3]>>, light_rng: &mut Rng, rng: &mut Rng) -> Vec3 {
     let (scene, inst, p) = (ctx.scene, ctx.inst, ctx.p);
     let mut l = Vec3::ZERO;
     let mut beta = Vec3::ONE;
     loop {
         let k = if depth == 0 { p.shadow_rays } else { 1 };
         let mut direct = Vec3::ZERO;
-        let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k, bsdf_per_light_sample: 1.0 / k as f32 };
+        let vertex_part = if depth == 0 { part } else { Part::WHOLE };
+        let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k, bsdf_per_light_sample: 1.0 / k as f32, part: vertex_part };
         add_direct_light(scene, inst, &q, light_rng, triples.take(), &mut direct);
         l += beta * direct;
-        if !s.sp.scatters {
+        if !s.sp.scatters || !vertex_part.shades_unsplit_terms() {
             break;
         }
         if let (0, Some(ticket), Scattering::Lambert(lam)) = (depth, cache, &s.sp.bsdf) {
@@ -145,7 +153,7 @@ fn indirect_along(ctx: &Ctx, origin: Vec3, dir: Vec3, light_rng: &mut Rng, rng: 
         Some(h) => {
             let t = h.t;
             let s = Surface::new(ctx.scene, ctx.inst, h, dir);
-            (scattered(ctx, s, 1, None, None, light_rng, rng), t)
+            (scattered(ctx, s, 1, Part::WHOLE, None, None, light_rng, rng), t)
         }
     }
 }

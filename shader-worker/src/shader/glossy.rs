@@ -6,7 +6,8 @@
 //! a conductor or a dielectric, the coat of a plastic (its base is what the ambient term
 //! stands for) and nothing of a Lambertian surface. What the rays bring back leaves out the
 //! light fixtures' own emission: the BSDF samples toward the area lights at the surface
-//! already count it, weighted against the light samples.
+//! already count it, weighted against the light samples. Split shading: the first hit's
+//! lights are split as `direct`'s; the reflected scene is part 0's.
 use super::direct::{add_lit, DirectParams, BSDF_STREAM};
 use super::hit::{primary, Surface};
 use super::{finish, RayRequest, Shaded};
@@ -14,6 +15,7 @@ use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
 use crate::rng::Rng;
 use edgepoint_scene::material::{Plastic, Scatter, Scattering};
+use edgepoint_proto::split::Part;
 use glam::Vec3;
 
 /// Parameters of the `glossy` shader (ranges and defaults: the shared table).
@@ -37,16 +39,20 @@ struct Streams {
     reflect: Rng,
 }
 
-pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GlossyParams, seed: u64, r: &RayRequest) -> Shaded {
-    let s = match primary(scene, inst, r) {
+pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &GlossyParams, seed: u64, r: &RayRequest, part: Part) -> Shaded {
+    let s = match primary(scene, inst, r, part) {
         Ok(s) => s,
         Err(done) => return done,
     };
     let mut triples = Vec::new();
-    let mut rgb = s.emitted();
+    let mut rgb = if part.shades_unsplit_terms() { s.emitted() } else { Vec3::ZERO };
     let mut rng = Streams { light: Rng::new(seed, r.id), bsdf: Rng::new(seed ^ BSDF_STREAM, r.id), reflect: Rng::new(seed ^ REFLECT_STREAM, r.id) };
-    add_lit(scene, inst, &s, &p.direct, &mut rng.light, &mut rng.bsdf, Some(&mut triples), &mut rgb);
-    rgb += reflected(scene, inst, p, &s, p.rays, p.max_depth, &mut rng);
+    add_lit(scene, inst, &s, &p.direct, part, &mut rng.light, &mut rng.bsdf, Some(&mut triples), &mut rgb);
+    // The reflected scene belongs to no single light: part 0 follows it (with every light at
+    // the surfaces it meets), from the same random states the whole shading reaches here.
+    if part.shades_unsplit_terms() {
+        rgb += reflected(scene, inst, p, &s, p.rays, p.max_depth, &mut rng);
+    }
     finish(r.id, Some(s.info()), rgb, triples)
 }
 
@@ -84,7 +90,7 @@ fn reflected(scene: &LoadedScene, inst: &Instances, p: &GlossyParams, s: &Surfac
             Some(h) => {
                 let next = Surface::new(scene, inst, h, wi);
                 let mut l = Vec3::ZERO;
-                add_lit(scene, inst, &next, &p.direct, &mut rng.light, &mut rng.bsdf, None, &mut l);
+                add_lit(scene, inst, &next, &p.direct, Part::WHOLE, &mut rng.light, &mut rng.bsdf, None, &mut l);
                 l + reflected(scene, inst, p, &next, 1, depth - 1, rng)
             }
         };

@@ -5,6 +5,7 @@ use super::{finish, HitInfo, RayRequest, Shaded};
 use crate::bvh::{Hit, Instances};
 use crate::loaded::LoadedScene;
 use crate::surface::ShadingPoint;
+use edgepoint_proto::split::Part;
 use edgepoint_scene::Material;
 use glam::Vec3;
 
@@ -68,13 +69,14 @@ fn unit_direction(origin: Vec3, direction: Vec3) -> Option<Vec3> {
 }
 
 /// A request's first hit, or its finished sample when there is none: a ray that cannot be
-/// traced is answered black and counted, a miss gets the background. Every shader starts here.
-pub(crate) fn primary<'a>(scene: &'a LoadedScene, inst: &Instances, r: &RayRequest) -> Result<Surface<'a>, Shaded> {
+/// traced is answered black and counted, a miss gets the background (in part 0 of a split
+/// sample: the background belongs to no light). Every shader starts here.
+pub(crate) fn primary<'a>(scene: &'a LoadedScene, inst: &Instances, r: &RayRequest, part: Part) -> Result<Surface<'a>, Shaded> {
     let Some(d) = unit_direction(r.origin, r.direction) else {
         return Err(finish(r.id, None, Vec3::NAN, Vec::new()));
     };
     match inst.closest_hit(&scene.bvh, r.origin, d, 0.0, f32::INFINITY) {
         Some(h) => Ok(Surface::new(scene, inst, h, d)),
-        None => Err(finish(r.id, None, scene.scene.background, Vec::new())),
+        None => Err(finish(r.id, None, if part.shades_unsplit_terms() { scene.scene.background } else { Vec3::ZERO }, Vec::new())),
     }
 }

@@ -80,12 +80,16 @@ pub struct Part {
     pub vpls: Range<usize>,
     /// Emission seen by the camera and background met by specular rays.
     pub rest: bool,
+    /// Of the lights in `lights`, those this part shades: a split session's part (lights
+    /// interleaved by index, as in the other shaders, so a part reports the triples of its
+    /// own lights only).
+    pub light_part: edgepoint_proto::split::Part,
 }
 
 impl Part {
     /// Everything: the unsplit shader.
     pub fn whole() -> Part {
-        Part { lights: 0..usize::MAX, vpls: 0..usize::MAX, rest: true }
+        Part { lights: 0..usize::MAX, vpls: 0..usize::MAX, rest: true, light_part: edgepoint_proto::split::Part::WHOLE }
     }
 }
 
@@ -106,7 +110,7 @@ pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &HybridParams, set
 /// One request's share `part` of the `hybrid` shading (module docs); [`Part::whole`] is
 /// the whole sample.
 pub fn shade_part(scene: &LoadedScene, inst: &Instances, p: &HybridParams, set: &VplSet, seed: u64, r: &RayRequest, part: &Part) -> (SampleOut, Vec<[u32; 3]>, bool) {
-    let s = match primary(scene, inst, r) {
+    let s = match primary(scene, inst, r, edgepoint_proto::split::Part::WHOLE) {
         Ok(s) => s,
         Err((sample, t, bad)) if !part.rest && !bad => return (SampleOut { rgb: Vec3::ZERO, ..sample }, t, bad),
         Err(done) => return done,
@@ -137,7 +141,7 @@ fn radiance(ctx: &Ctx, s: &Surface, depth: u32, beta: Vec3, vertex: &mut u64, mu
     let mut l = Vec3::ZERO;
     // Lights, one at a time (each with its own stream).
     let lights = ctx.part.lights.start.min(scene.lights.len())..ctx.part.lights.end.min(scene.lights.len());
-    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0 };
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0, part: ctx.part.light_part };
     for li in lights.clone() {
         add_direct_light_in(scene, inst, &q, li..li + 1, &mut light_rng(ctx, v, li), triples.as_deref_mut(), &mut l);
     }

@@ -7,6 +7,7 @@
 //! Every blocked shadow ray reports a light–blocker–receiver triple when the caller collects
 //! them (first hits only: the edge finder's receivers are what the camera sees).
 use super::push_unique;
+use edgepoint_proto::split::Part;
 use crate::bsdf_rays::{light_pdf, power_heuristic};
 use crate::bvh::Instances;
 use crate::loaded::{LoadedScene, PreparedLight};
@@ -29,6 +30,9 @@ pub(crate) struct LightQuery<'a> {
     /// BSDF samples the caller draws toward the lights per light sample: 1 when it draws
     /// as many as `k` (the `direct` shader), 1/k for a path's single next ray.
     pub bsdf_per_light_sample: f32,
+    /// Which lights to sample (split shading): the others are passed over, their random
+    /// numbers skipped, so every part draws what the whole shading would have drawn.
+    pub part: Part,
 }
 
 /// Adds the sampled direct light at `q` to `rgb` (in the order the `direct` shader always
@@ -53,8 +57,10 @@ pub(crate) fn add_direct_light_in(scene: &LoadedScene, inst: &Instances, q: &Lig
         }
     };
     for (li, light) in scene.lights.iter().enumerate().take(lights.end).skip(lights.start) {
+        let owned = q.part.owns(li);
         let li = li as u32;
         match light {
+            PreparedLight::Point { .. } if !owned => {}
             PreparedLight::Point { position, intensity, cone } => {
                 let to = *position - origin;
                 let d2 = to.length_squared();
@@ -83,6 +89,11 @@ pub(crate) fn add_direct_light_in(scene: &LoadedScene, inst: &Instances, q: &Lig
                     continue;
                 }
                 let k = q.k;
+                if !owned {
+                    // Another part samples this light: one rotation and two numbers a ray.
+                    rng.skip(1 + 2 * k as u64);
+                    continue;
+                }
                 let nx = (k as f32).sqrt().ceil() as u32;
                 let ny = k.div_ceil(nx);
                 let cells = nx * ny;

@@ -14,6 +14,11 @@
 //! Shared pieces: [`hit::Surface`] (a hit made ready to shade), the light-sampling estimator
 //! ([`lights`]) and the NaN / infinity filter in [`finish`], so no shader can let a
 //! non-finite value leave the worker.
+//!
+//! Split shading (paper 004 §4.4): a request can carry a [`Part`] of its pixel's shading;
+//! each shader samples only the part's lights ([`Part::owns`]) and leaves the terms of no
+//! light (emission, ambient, indirect and reflected light) to part 0, skipping the random
+//! numbers of what it does not shade ([`shade_batch_parts`]).
 pub mod direct;
 pub mod elements;
 pub mod gi;
@@ -31,6 +36,7 @@ pub use hybrid::HybridParams;
 
 use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
+pub use edgepoint_proto::split::Part;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
@@ -135,16 +141,47 @@ pub(crate) type Shaded = (SampleOut, Vec<[u32; 3]>, bool);
 /// depends on the order threads create them. `hybrid` first builds its virtual point
 /// lights if this scene, transforms and parameters have none yet.
 pub fn shade_batch(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, seed: u64, requests: &[RayRequest]) -> ShadeOutput {
+    shade_batch_parts(scene, inst, spec, seed, requests, &[])
+}
+
+/// [`shade_batch`] of split shading (paper 004 §4.4): request `i` shades only `parts[i]` of
+/// its pixel's shading (`parts` empty: every request whole; else one part per request).
+/// Every part of a request, shaded with the same seed, draws the random numbers the whole
+/// shading would draw, so the parts' radiance adds up to the whole shading's up to float
+/// summation order, and the parts' triples to its triples.
+pub fn shade_batch_parts(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpec, seed: u64, requests: &[RayRequest], parts: &[Part]) -> ShadeOutput {
+    assert!(parts.is_empty() || parts.len() == requests.len(), "one part per request (or none)");
+    let part = |i: usize| parts.get(i).copied().unwrap_or(Part::WHOLE);
     let per: Vec<Shaded> = match spec {
-        ShaderSpec::Direct(p) => requests.par_iter().map(|r| direct::shade(scene, inst, p, seed, r)).collect(),
-        ShaderSpec::Glossy(p) => requests.par_iter().map(|r| glossy::shade(scene, inst, p, seed, r)).collect(),
+        ShaderSpec::Direct(p) => requests.par_iter().enumerate().map(|(i, r)| direct::shade(scene, inst, p, seed, r, part(i))).collect(),
+        ShaderSpec::Glossy(p) => requests.par_iter().enumerate().map(|(i, r)| glossy::shade(scene, inst, p, seed, r, part(i))).collect(),
         ShaderSpec::Gi(p) => {
             let cache = p.cache.then(|| scene.irradiance.sync(&scene.scene, inst.transforms(), p.cache_settings()));
-            requests.par_iter().map(|r| gi::shade(scene, inst, p, cache, seed, r)).collect()
+            requests.par_iter().enumerate().map(|(i, r)| gi::shade(scene, inst, p, cache, seed, r, part(i))).collect()
         }
         ShaderSpec::Hybrid(p) => {
             let vpls = scene.vpls.get(scene, inst, p.vpl_settings());
-            requests.par_iter().map(|r| hybrid::shade(scene, inst, p, &vpls, seed, r)).collect()
+            // A split part of `hybrid` shades its lights (interleaved, as in the other
+            // shaders) and a contiguous share of the virtual point lights, brightest first
+            // (each light and VPL has its own random stream, so any share adds up).
+            let share = |part: Part| hybrid::Part {
+                lights: 0..scene.lights.len(),
+                vpls: part.range(vpls.vpls.len()),
+                rest: part.shades_unsplit_terms(),
+                light_part: part,
+            };
+            requests
+                .par_iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    let part = part(i);
+                    if part.is_whole() {
+                        hybrid::shade(scene, inst, p, &vpls, seed, r)
+                    } else {
+                        hybrid::shade_part(scene, inst, p, &vpls, seed, r, &share(part))
+                    }
+                })
+                .collect()
         }
     };
     merge(per)
