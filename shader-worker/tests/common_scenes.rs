@@ -1,6 +1,7 @@
 //! Small scenes built in code for the worker tests.
 #![allow(dead_code)]
-use edgepoint_scene::{Camera, Light, Material, Mesh, NoProgress, Object, Scene};
+use edgepoint_scene::{Bsdf, Camera, Light, Material, Mesh, NoProgress, Object, Scene};
+use edgepoint_worker::{RayRequest, ShaderSpec};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
 
@@ -64,4 +65,35 @@ pub fn polygon_irradiance(p: Vec3, n: Vec3, poly: &[Vec3]) -> f32 {
         e += 0.5 * beta * n.dot(a.cross(b).normalize());
     }
     e.abs()
+}
+
+/// A shader's spec from its name and parameters (the others at their defaults).
+pub fn spec(name: &str, kv: &[(&str, f64)]) -> ShaderSpec {
+    ShaderSpec::parse(name, &kv.iter().map(|(k, v)| (k.to_string(), *v)).collect()).unwrap()
+}
+
+/// Rays through the pixel centres of a `w` × `h` image of the scene's camera, id = pixel index.
+pub fn camera_rays(s: &Scene, w: u32, h: u32) -> Vec<RayRequest> {
+    let cam = s.camera.frame(w, h);
+    (0..w * h)
+        .map(|i| {
+            let (o, d) = cam.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            RayRequest { id: i as u64, pixel: [i % w, i / w], origin: o, direction: d }
+        })
+        .collect()
+}
+
+/// The mirror closed-form tests' objects: a smooth conductor floor (y = 0, 6 × 6, base colour
+/// (1, 0.9, 0.8), complex index `eta` + i`k`) before a diffuse wall of albedo 0.6 at z = −2.
+pub fn mirror_floor_and_wall(eta: Vec3, k: Vec3) -> Vec<Object> {
+    let mut floor = object("floor", quad(0.0, 3.0, true), 0.0);
+    floor.material.bsdf = Bsdf::Conductor { eta, k, roughness: 0.0 };
+    floor.material.diffuse = Vec3::new(1.0, 0.9, 0.8);
+    let wall_mesh = Mesh::from_triangles(
+        vec![Vec3::new(-3.0, 0.0, -2.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(3.0, 4.0, -2.0), Vec3::new(-3.0, 4.0, -2.0)],
+        vec![[0, 1, 2], [0, 2, 3]],
+        &NoProgress,
+    );
+    let wall = Object { name: "wall".into(), mesh: Arc::new(wall_mesh), material: Material::diffuse("wall", Vec3::splat(0.6)), transform: Affine3A::IDENTITY };
+    vec![floor, wall]
 }

@@ -6,26 +6,12 @@
 mod common_scenes;
 use common_scenes::*;
 use edgepoint_scene::material::fresnel;
-use edgepoint_scene::{Bsdf, Light, Material, Mesh, NoProgress, Object, Scene};
+use edgepoint_scene::{Light, Material, Mesh, NoProgress, Object, Scene};
 use edgepoint_worker::{shade_batch, LoadedScene, RayRequest, ShadeOutput, ShaderSpec};
 use glam::{Affine3A, Vec3};
 use std::collections::HashMap;
 use std::f32::consts::PI;
 use std::sync::Arc;
-
-fn spec(name: &str, kv: &[(&str, f64)]) -> ShaderSpec {
-    ShaderSpec::parse(name, &kv.iter().map(|(k, v)| (k.to_string(), *v)).collect()).unwrap()
-}
-
-fn camera_rays(s: &Scene, w: u32, h: u32) -> Vec<RayRequest> {
-    let cam = s.camera.frame(w, h);
-    (0..w * h)
-        .map(|i| {
-            let (o, d) = cam.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-            RayRequest { id: i as u64, pixel: [i % w, i / w], origin: o, direction: d }
-        })
-        .collect()
-}
 
 /// Mean and standard error of the red channel of a batch's samples.
 fn mean_se(out: &ShadeOutput) -> (f64, f64) {
@@ -112,19 +98,10 @@ fn white_furnace_converges_to_its_closed_form() {
 #[test]
 fn glossy_mirror_matches_the_fresnel_closed_form() {
     let (eta, k) = (Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2));
-    let mut floor = object("floor", quad(0.0, 3.0, true), 0.0);
-    floor.material.bsdf = Bsdf::Conductor { eta, k, roughness: 0.0 };
-    floor.material.diffuse = Vec3::new(1.0, 0.9, 0.8);
-    let wall_mesh = Mesh::from_triangles(
-        vec![Vec3::new(-3.0, 0.0, -2.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(3.0, 4.0, -2.0), Vec3::new(-3.0, 4.0, -2.0)],
-        vec![[0, 1, 2], [0, 2, 3]],
-        &NoProgress,
-    );
-    let wall = Object { name: "wall".into(), mesh: Arc::new(wall_mesh), material: Material::diffuse("wall", Vec3::splat(0.6)), transform: Affine3A::IDENTITY };
     let light = Vec3::new(0.5, 1.5, -1.0);
     let intensity = Vec3::new(3.0, 2.0, 1.0);
     let ambient = 0.05;
-    let s = scene(vec![floor, wall], vec![Light::Point { position: light, intensity }], ambient);
+    let s = scene(mirror_floor_and_wall(eta, k), vec![Light::Point { position: light, intensity }], ambient);
     let loaded = LoadedScene::build(s, "mirror".into(), &NoProgress);
     let inst = loaded.instances(&loaded.default_transforms());
     let eye = Vec3::new(0.0, 1.0, 2.0);

@@ -5,7 +5,7 @@
 mod common_scenes;
 use common_scenes::*;
 use edgepoint_scene::material::fresnel;
-use edgepoint_scene::{Bsdf, Light, Material, Mesh, NoProgress, Object, Scene};
+use edgepoint_scene::{Bsdf, Light, NoProgress};
 use edgepoint_worker::shader::hybrid::{shade_part, Part};
 use edgepoint_worker::{shade_batch, HybridParams, LoadedScene, RayRequest, ShaderSpec};
 use glam::{Affine3A, Vec3};
@@ -13,25 +13,11 @@ use std::collections::HashMap;
 use std::f32::consts::PI;
 use std::sync::Arc;
 
-fn spec(name: &str, kv: &[(&str, f64)]) -> ShaderSpec {
-    ShaderSpec::parse(name, &kv.iter().map(|(k, v)| (k.to_string(), *v)).collect()).unwrap()
-}
-
 fn hybrid(kv: &[(&str, f64)]) -> HybridParams {
     match spec("hybrid", kv) {
         ShaderSpec::Hybrid(p) => p,
         other => panic!("{other:?}"),
     }
-}
-
-fn camera_rays(s: &Scene, w: u32, h: u32) -> Vec<RayRequest> {
-    let cam = s.camera.frame(w, h);
-    (0..w * h)
-        .map(|i| {
-            let (o, d) = cam.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-            RayRequest { id: i as u64, pixel: [i % w, i / w], origin: o, direction: d }
-        })
-        .collect()
 }
 
 fn lum(v: &Vec3) -> f64 {
@@ -106,18 +92,9 @@ fn vpl_indirect_light_matches_one_bounce_path_tracing_on_the_diffuse_cornell_box
 #[test]
 fn the_mirror_reflects_the_scene_with_its_fresnel_weight() {
     let (eta, k) = (Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2));
-    let mut floor = object("floor", quad(0.0, 3.0, true), 0.0);
-    floor.material.bsdf = Bsdf::Conductor { eta, k, roughness: 0.0 };
-    floor.material.diffuse = Vec3::new(1.0, 0.9, 0.8);
-    let wall_mesh = Mesh::from_triangles(
-        vec![Vec3::new(-3.0, 0.0, -2.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(3.0, 4.0, -2.0), Vec3::new(-3.0, 4.0, -2.0)],
-        vec![[0, 1, 2], [0, 2, 3]],
-        &NoProgress,
-    );
-    let wall = Object { name: "wall".into(), mesh: Arc::new(wall_mesh), material: Material::diffuse("wall", Vec3::splat(0.6)), transform: Affine3A::IDENTITY };
     let light = Vec3::new(0.5, 1.5, -1.0);
     let intensity = Vec3::new(3.0, 2.0, 1.0);
-    let s = scene(vec![floor, wall], vec![Light::Point { position: light, intensity }], 0.05);
+    let s = scene(mirror_floor_and_wall(eta, k), vec![Light::Point { position: light, intensity }], 0.05);
     let loaded = LoadedScene::build(s, "mirror".into(), &NoProgress);
     let inst = loaded.instances(&loaded.default_transforms());
     let eye = Vec3::new(0.0, 1.0, 2.0);
