@@ -1,7 +1,7 @@
 //! Small scenes built in code for the worker tests.
 #![allow(dead_code)]
 use edgepoint_scene::{Bsdf, Camera, Light, Material, Mesh, NoProgress, Object, Scene};
-use edgepoint_worker::{RayRequest, ShaderSpec};
+use edgepoint_worker::{LoadedScene, RayRequest, ShaderSpec};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
 
@@ -81,6 +81,13 @@ pub fn camera_rays(s: &Scene, w: u32, h: u32) -> Vec<RayRequest> {
             RayRequest { id: i as u64, pixel: [i % w, i / w], origin: o, direction: d }
         })
         .collect()
+}
+
+/// Built-in scene `name`, loaded for shading, with its camera's `w` × `h` pixel-centre rays.
+pub fn builtin_with_rays(name: &str, w: u32, h: u32) -> (LoadedScene, Vec<RayRequest>) {
+    let s = edgepoint_scene::builtin::load(name).unwrap();
+    let reqs = camera_rays(&s, w, h);
+    (LoadedScene::build(s, name.into(), &NoProgress), reqs)
 }
 
 /// The mirror closed-form tests' objects: a smooth conductor floor (y = 0, 6 × 6, base colour

@@ -126,9 +126,7 @@ fn glossy_mirror_matches_the_fresnel_closed_form() {
 /// bit; and `gi` with one vertex is `direct` without the ambient term, bit for bit.
 #[test]
 fn glossy_and_single_vertex_gi_reduce_to_direct_on_diffuse_scenes() {
-    let s = edgepoint_scene::builtin::load("cornell").unwrap();
-    let reqs = camera_rays(&s, 32, 32);
-    let loaded = LoadedScene::build(s, "cornell".into(), &NoProgress);
+    let (loaded, reqs) = builtin_with_rays("cornell", 32, 32);
     let inst = loaded.instances(&loaded.default_transforms());
     let direct = shade_batch(&loaded, &inst, &spec("direct", &[("shadow_rays", 4.0)]), 5, &reqs);
     let glossy = shade_batch(&loaded, &inst, &spec("glossy", &[("shadow_rays", 4.0)]), 5, &reqs);

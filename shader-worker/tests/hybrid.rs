@@ -183,7 +183,7 @@ fn parts_add_up_to_the_whole_sample() {
         let set = loaded.vpls.get(&loaded, &inst, p.vpl_settings());
         let nl = loaded.lights.len();
         let parts: Vec<Part> = (0..3)
-            .map(|i| Part { lights: (i * nl / 3)..((i + 1) * nl / 3), vpls: (i * set.vpls.len() / 3)..((i + 1) * set.vpls.len() / 3), rest: i == 0, light_part: edgepoint_proto::split::Part::WHOLE })
+            .map(|i| Part { lights: edgepoint_proto::split::Part { index: i as u32, count: 3 }, vpls: (i * set.vpls.len() / 3)..((i + 1) * set.vpls.len() / 3), rest: i == 0 })
             .collect();
         let mut worst = 0.0f32;
         for r in &reqs {
@@ -214,9 +214,7 @@ fn parts_add_up_to_the_whole_sample() {
 /// without its ambient term, bit for bit, triples included.
 #[test]
 fn without_vpls_on_a_lambertian_one_light_scene_hybrid_is_direct() {
-    let s = edgepoint_scene::builtin::load("cornell").unwrap();
-    let reqs = camera_rays(&s, 32, 32);
-    let loaded = LoadedScene::build(s, "cornell".into(), &NoProgress);
+    let (loaded, reqs) = builtin_with_rays("cornell", 32, 32);
     let inst = loaded.instances(&loaded.default_transforms());
     let direct = shade_batch(&loaded, &inst, &spec("direct", &[("ambient", 0.0)]), 5, &reqs);
     let hyb = shade_batch(&loaded, &inst, &spec("hybrid", &[("vpls", 0.0)]), 5, &reqs);

@@ -74,22 +74,19 @@ const BSDF_STREAM: u64 = 0x6879_6272_6964_5f62;
 /// A share of one sample's shading (module docs).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Part {
-    /// Lights shaded (indices into the scene's lights).
-    pub lights: Range<usize>,
+    /// Lights shaded: those a split session's part owns (interleaved by index, as in the
+    /// other shaders, so a part reports the triples of its own lights only).
+    pub lights: edgepoint_proto::split::Part,
     /// VPLs shaded (indices into the set, brightest first).
     pub vpls: Range<usize>,
     /// Emission seen by the camera and background met by specular rays.
     pub rest: bool,
-    /// Of the lights in `lights`, those this part shades: a split session's part (lights
-    /// interleaved by index, as in the other shaders, so a part reports the triples of its
-    /// own lights only).
-    pub light_part: edgepoint_proto::split::Part,
 }
 
 impl Part {
     /// Everything: the unsplit shader.
     pub fn whole() -> Part {
-        Part { lights: 0..usize::MAX, vpls: 0..usize::MAX, rest: true, light_part: edgepoint_proto::split::Part::WHOLE }
+        Part { lights: edgepoint_proto::split::Part::WHOLE, vpls: 0..usize::MAX, rest: true }
     }
 }
 
@@ -140,14 +137,14 @@ fn radiance(ctx: &Ctx, s: &Surface, depth: u32, beta: Vec3, vertex: &mut u64, mu
     *vertex += 1;
     let mut l = Vec3::ZERO;
     // Lights, one at a time (each with its own stream).
-    let lights = ctx.part.lights.start.min(scene.lights.len())..ctx.part.lights.end.min(scene.lights.len());
-    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0, part: ctx.part.light_part };
-    for li in lights.clone() {
+    let lights = ctx.part.lights;
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0, part: edgepoint_proto::split::Part::WHOLE };
+    for li in (0..scene.lights.len()).filter(|&li| lights.owns(li)) {
         add_direct_light_in(scene, inst, &q, li..li + 1, &mut light_rng(ctx, v, li), triples.as_deref_mut(), &mut l);
     }
     let mut bsdf_rng = Rng::new(ctx.seed ^ BSDF_STREAM ^ v.wrapping_mul(0x9e37_79b9_7f4a_7c15), ctx.id);
     if s.sp.scatters && s.sp.is_glossy() {
-        l += lights_via_bsdf(ctx, &s.sp, s.origin, s.n, &lights, &mut bsdf_rng);
+        l += lights_via_bsdf(ctx, &s.sp, s.origin, s.n, lights, &mut bsdf_rng);
     }
     add_vpl_light(scene, inst, &s.sp, s.origin, s.n, ctx.vpls, &mut l);
     if depth == 0 || !s.sp.scatters || !s.sp.bsdf_has_delta() {
@@ -163,7 +160,7 @@ fn radiance(ctx: &Ctx, s: &Surface, depth: u32, beta: Vec3, vertex: &mut u64, mu
         // An area light in front of the next surface is seen (a luminaire object lying
         // on it is met at the same distance, hence the allowance).
         if let Some((li, a, t)) = nearest_light(scene, origin, wi) {
-            if lights.contains(&li) && hit.is_none_or(|h| t <= h.t * (1.0 + 1e-3) + scene.epsilon) {
+            if lights.owns(li) && hit.is_none_or(|h| t <= h.t * (1.0 + 1e-3) + scene.epsilon) {
                 l += weight * a.radiance;
             }
         }
@@ -224,8 +221,8 @@ fn nearest_light(scene: &LoadedScene, origin: Vec3, dir: Vec3) -> Option<(usize,
 }
 
 /// The BSDF-sampled half of a rough lobe's area-light estimate (as `direct`'s: as many
-/// samples as light samples, power heuristic), counting only the lights in `lights`.
-fn lights_via_bsdf(ctx: &Ctx, sp: &ShadingPoint, origin: Vec3, n: Vec3, lights: &Range<usize>, rng: &mut Rng) -> Vec3 {
+/// samples as light samples, power heuristic), counting only the lights `lights` owns.
+fn lights_via_bsdf(ctx: &Ctx, sp: &ShadingPoint, origin: Vec3, n: Vec3, lights: edgepoint_proto::split::Part, rng: &mut Rng) -> Vec3 {
     let (scene, inst) = (ctx.scene, ctx.inst);
     let k = ctx.p.shadow_rays;
     let mut sum = Vec3::ZERO;
@@ -237,7 +234,7 @@ fn lights_via_bsdf(ctx: &Ctx, sp: &ShadingPoint, origin: Vec3, n: Vec3, lights: 
             continue;
         }
         let Some((li, a, t)) = nearest_light(scene, origin, wi) else { continue };
-        if !lights.contains(&li) || inst.occluded(&scene.bvh, origin, wi, 0.0, t * (1.0 - 1e-4)).is_some() {
+        if !lights.owns(li) || inst.occluded(&scene.bvh, origin, wi, 0.0, t * (1.0 - 1e-4)).is_some() {
             continue;
         }
         let cos_l = -a.normal.dot(wi);

@@ -164,12 +164,7 @@ pub fn shade_batch_parts(scene: &LoadedScene, inst: &Instances, spec: &ShaderSpe
             // A split part of `hybrid` shades its lights (interleaved, as in the other
             // shaders) and a contiguous share of the virtual point lights, brightest first
             // (each light and VPL has its own random stream, so any share adds up).
-            let share = |part: Part| hybrid::Part {
-                lights: 0..scene.lights.len(),
-                vpls: part.range(vpls.vpls.len()),
-                rest: part.shades_unsplit_terms(),
-                light_part: part,
-            };
+            let share = |part: Part| hybrid::Part { lights: part, vpls: part.range(vpls.vpls.len()), rest: part.shades_unsplit_terms() };
             requests
                 .par_iter()
                 .enumerate()
