@@ -255,15 +255,19 @@ fn banded(t: &Tables, input: &ComplexInput, grid: &[Sub; 36], at: (usize, usize)
     // The samples of the subpixels along the bands: the row (or column) of the grid through
     // s, as far as the cells go on with the same bands (those outside the image are
     // complex with no crossings and end it).
+    let (w, h) = (input.flags.width, input.flags.height);
     let mut add = |gx: usize, gy: usize| -> bool {
-        if grid[gy * 6 + gx].c4 != CLASS_COMPLEX {
+        // A cell outside the image ends the run before its crossings are read: the
+        // boundary masks have no entries there (at the left or top border its pixel
+        // coordinate would be -1).
+        let (px, py) = ((at.0 + gx / 2).wrapping_sub(1), (at.1 + gy / 2).wrapping_sub(1));
+        if px >= w || py >= h || grid[gy * 6 + gx].c4 != CLASS_COMPLEX {
             return false;
         }
         let Some(b) = cell_bands(gx, gy) else { return false };
         if b.vertical != bands.vertical || b.n != n {
             return false;
         }
-        let (px, py) = (at.0 + gx / 2 - 1, at.1 + gy / 2 - 1);
         if input.flags.get(px, py, Flags::HAS) {
             let idx = py * input.flags.width + px;
             let [u, v] = input.points.subpixel[idx];

@@ -155,17 +155,26 @@ fn two_crossing_edges_are_reconstructed_better_than_by_plain_interpolation() {
 /// samples shown) against the exact band areas, and how many pixels it averaged.
 fn close_parallel_edges(transpose: bool, seed: u64) -> (f32, usize) {
     let lines = [(0.50, 0.62), (0.75, 0.87)];
-    parallel_edges(lines, [Vec3::splat(0.05), Vec3::splat(0.05), Vec3::new(4.0, 2.0, 0.5)], false, transpose, seed)
+    parallel_edges(lines, [Vec3::splat(0.05), Vec3::splat(0.05), Vec3::new(4.0, 2.0, 0.5)], false, transpose, seed).0
 }
 
 /// Two lines across row 5, from (0, 5 + a) to (n, 5 + b) each, cutting the plane into three
 /// bands of `colours`; with `empty_sliver` no sample lies between them (points there move
-/// to the top of their pixel, above both lines). Returns what [`close_parallel_edges`] does.
-fn parallel_edges(lines: [(f64, f64); 2], colours: [Vec3; 3], empty_sliver: bool, transpose: bool, seed: u64) -> (f32, usize) {
+/// to the top of their pixel, above both lines). Returns what [`close_parallel_edges`] does,
+/// and the reconstructed colours of the row's two end pixels (on the image border).
+fn parallel_edges(lines: [(f64, f64); 2], colours: [Vec3; 3], empty_sliver: bool, transpose: bool, seed: u64) -> ((f32, usize), [Vec3; 2]) {
+    parallel_edges_at(5, false, lines, colours, empty_sliver, transpose, seed)
+}
+
+/// [`parallel_edges`] across row `row` (0 and the last row put the bands on the border);
+/// with `beyond` the lines run on a pixel past both ends of the row, so that they cross the
+/// sides of the end pixels that lie on the image's border too.
+fn parallel_edges_at(row: usize, beyond: bool, lines: [(f64, f64); 2], colours: [Vec3; 3], empty_sliver: bool, transpose: bool, seed: u64) -> ((f32, usize), [Vec3; 2]) {
     let (w, h) = (13usize, 11usize);
-    let (n, row) = (if transpose { h } else { w }, 5.0);
+    let (n, row) = (if transpose { h } else { w }, row as f64);
+    let (t0, t1) = if beyond { (-1.0 / n as f64, 1.0 + 1.0 / n as f64) } else { (0.0, 1.0) };
     let flip = |p: [f64; 2]| if transpose { [p[1], p[0]] } else { p };
-    let lines = lines.map(|(a, b)| ([0.0, row + a], [n as f64, row + b]));
+    let lines = lines.map(|(a, b)| ([t0 * n as f64, row + a + (b - a) * t0], [t1 * n as f64, row + a + (b - a) * t1]));
     // Band of a point in the untransposed picture: above both lines, between, below both.
     let band = |p: [f64; 2]| lines.iter().filter(|l| orient(l.0, l.1, p) < 0.0).count();
     let mut rng = Rng(seed);
@@ -208,7 +217,8 @@ fn parallel_edges(lines: [(f64, f64); 2], colours: [Vec3; 3], empty_sliver: bool
         err += (image[y * w + x] - exact).length();
         count += 1;
     }
-    (err / count.max(1) as f32, count)
+    let end = |k: usize| if transpose { image[k * w + row as usize] } else { image[row as usize * w + k] };
+    ((err / count.max(1) as f32, count), [end(0), end(n - 1)])
 }
 
 #[test]
@@ -244,11 +254,37 @@ fn a_sliver_without_samples_takes_the_other_region_of_its_subpixel() {
     for transpose in [false, true] {
         let mut total = 0.0;
         for seed in 0..8 {
-            let (err, count) = parallel_edges(lines, [light, light, dark], true, transpose, 700 + seed);
+            let ((err, count), _) = parallel_edges(lines, [light, light, dark], true, transpose, 700 + seed);
             assert!(count >= 8, "only {count} complex pixels on the row (transpose {transpose})");
             total += err;
         }
         let mean = total / 8.0;
         assert!(mean < 1.0, "mean error {mean} of the sliver's pixels (transpose {transpose})");
+    }
+}
+
+#[test]
+fn bands_on_the_image_border_stay_inside_it() {
+    // The close parallel lines along the first and the last row (and, transposed, column),
+    // on past the image's sides: every pixel of that row is complex and banded, and the
+    // bands' runs along the row reach the grid cells beyond the image's corners. (An orbit
+    // through `rooms` put such a pixel on the top row and the run read the boundary masks at
+    // row -1: a panic.) The row's pixels, the corner ones too, come out as blends of the
+    // three colours; a border pixel has a neighbour row fewer to take samples from, so its
+    // band colours are rougher than inside (mean errors 0.38–1.64 here, against 0.36 inside).
+    // The lines keep to one half of the row's pixels (0.60–0.86), so that the end pixels'
+    // subpixels hold both of them and are banded right at the corner.
+    let colours = [Vec3::splat(0.05), Vec3::splat(0.05), Vec3::new(4.0, 2.0, 0.5)];
+    for transpose in [false, true] {
+        for row in [0, if transpose { 12 } else { 10 }] {
+            for seed in 0..4 {
+                let ((err, count), ends) = parallel_edges_at(row, true, [(0.60, 0.66), (0.80, 0.86)], colours, false, transpose, 300 + seed);
+                assert!(count >= 8, "only {count} complex pixels on border row {row} (transpose {transpose})");
+                assert!(err < 2.0, "mean error {err} of the banded pixels of border row {row} (transpose {transpose})");
+                for c in ends {
+                    assert!(c.is_finite() && c.cmpge(Vec3::splat(0.05 - 1e-4)).all() && c.cmple(Vec3::new(4.0, 2.0, 0.5) + 1e-4).all(), "corner pixel {c} of border row {row}");
+                }
+            }
+        }
     }
 }
