@@ -2,7 +2,7 @@
 mod common_scenes;
 use common_scenes::*;
 use edgepoint_scene::{NoProgress, Scene};
-use edgepoint_worker::LoadedScene;
+use edgepoint_worker::{Instances, LoadedScene, Simd};
 use glam::{Affine3A, Quat, Vec3};
 
 use edgepoint_worker::ray_oracle::{barycentric_margin, ray_triangle as tri_t};
@@ -33,9 +33,25 @@ impl Lcg {
     }
 }
 
+/// The instruction sets this CPU runs: the traversal is checked with each.
+fn simds() -> Vec<Simd> {
+    let mut v = vec![Simd::Baseline];
+    if Simd::detect() != Simd::Baseline {
+        v.push(Simd::detect());
+    }
+    v
+}
+
 fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
     let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
-    let inst = loaded.instances(&tf);
+    for simd in simds() {
+        let inst = loaded.instances(&tf).with_simd(simd);
+        assert_eq!(inst.simd(), simd);
+        check_with(&scene, &tf, &loaded, &inst, rays, seed);
+    }
+}
+
+fn check_with(scene: &Scene, tf: &[Affine3A], loaded: &LoadedScene, inst: &Instances, rays: usize, seed: u64) {
     let (lo, hi) = scene.bounds();
     let c = (lo + hi) * 0.5;
     let r = (hi - lo).length();
@@ -46,7 +62,7 @@ fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
         // Aim near the scene so most rays hit something.
         let d = (c + rng.v(r * 0.3) - o).normalize();
         let got = inst.closest_hit(&loaded.bvh, o, d, 0.0, f32::INFINITY);
-        let want = brute(&scene, &tf, o, d);
+        let want = brute(scene, tf, o, d);
         match (got, want) {
             (None, None) => agree += 1,
             (Some(g), Some((wo, wt, t))) => {
@@ -312,9 +328,11 @@ fn random_triangle_soups_match_brute_force_closest_and_any_hit() {
         let scene = scene(objs, vec![], 0.0);
         let tf = vec![Affine3A::IDENTITY];
         let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
-        let inst = loaded.instances(&tf);
         let meshes: Vec<_> = scene.objects.iter().map(|o| o.mesh.as_ref()).collect();
-        for _ in 0..400 {
+        let insts: Vec<_> = simds().into_iter().map(|s| loaded.instances(&tf).with_simd(s)).collect();
+        for k in 0..800 {
+            // Each instruction set on alternate rays.
+            let inst = &insts[k % insts.len()];
             rays += 1;
             let o = rng.v(1.5);
             let d = (rng.v(1.0) - o * 0.5).normalize_or(Vec3::X);
@@ -372,7 +390,7 @@ fn dragon_matches_brute_force() {
     let mesh = dragon.mesh.clone();
     let tf = vec![dragon.transform];
     let bvh = edgepoint_worker::SceneBvh::build(&[mesh.as_ref()], &NoProgress);
-    let inst = edgepoint_worker::Instances::new(&bvh, &tf);
+    let insts: Vec<_> = simds().into_iter().map(|s| edgepoint_worker::Instances::new(&bvh, &tf).with_simd(s)).collect();
     let (lo, hi) = edgepoint_scene::geometry::transformed_box(&tf[0], mesh.bounds);
     let c = (lo + hi) * 0.5;
     let eye = c + Vec3::new(0.0, 0.0, 0.25);
@@ -389,7 +407,7 @@ fn dragon_matches_brute_force() {
     use rayon::prelude::*;
     let results: Vec<_> = rays.par_iter().map(|&(o, d)| (o, d, edgepoint_worker::ray_oracle::closest(&meshes, &tf, o, d, 0.0, f64::INFINITY))).collect();
     let mut hits = 0;
-    for (o, d, want) in results {
+    for ((o, d, want), inst) in results.into_iter().flat_map(|r| insts.iter().map(move |i| (r, i))) {
         let got = inst.closest_hit(&bvh, o, d, 0.0, f32::INFINITY);
         match (got, want) {
             (None, None) => {}
