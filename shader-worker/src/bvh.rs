@@ -101,7 +101,7 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
     fn visit(&mut self, b: u32, t: &mut f32) -> bool {
         let r = self.ray;
         // SAFETY: made only where `N`'s instructions run (see the struct).
-        if let Some((lane, th)) = unsafe { self.object.blocks[b as usize].intersect::<N>(r.origin, r.direction, r.tmin, *t) } {
+        if let Some((lane, th)) = unsafe { self.object.blocks[b as usize].intersect::<N>(r, *t) } {
             *t = th;
             self.best = Some((b, lane));
         }
@@ -122,7 +122,7 @@ impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
     fn visit(&mut self, b: u32, t: &mut f32) -> bool {
         let r = self.ray;
         // SAFETY: made only where `N`'s instructions run (see `ClosestInObject`).
-        self.hit = unsafe { self.object.blocks[b as usize].any::<N>(r.origin, r.direction, r.tmin, *t) };
+        self.hit = unsafe { self.object.blocks[b as usize].any::<N>(r, *t) };
         self.hit
     }
 }
@@ -300,6 +300,19 @@ impl Instances {
         PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin)
     }
 
+    /// The ray a query starts with: already in the object's space when there is one object
+    /// (the top level is skipped), else in world space: preparing a ray takes three divides,
+    /// so the one-object path does not prepare the world ray first.
+    #[inline(always)]
+    fn start_ray(&self, origin: Vec3, dir: Vec3, tmin: f32) -> PreparedRay {
+        if self.single {
+            let inv = &self.to_object[0];
+            PreparedRay::new(inv.transform_point3a(origin.into()), inv.transform_vector3a(dir.into()), tmin)
+        } else {
+            PreparedRay::new(origin.into(), dir.into(), tmin)
+        }
+    }
+
     /// The object-to-world transforms (one per object) this top level was built for.
     #[inline]
     pub fn transforms(&self) -> &[Affine3A] {
@@ -308,7 +321,7 @@ impl Instances {
 
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
-        let ray = PreparedRay::new(origin.into(), dir.into(), tmin);
+        let ray = self.start_ray(origin, dir, tmin);
         let found = match self.simd {
             // SAFETY: `simd` is only `Avx2` when the CPU has AVX2 and FMA (`Simd::detect`,
             // `with_simd`).
@@ -340,7 +353,7 @@ impl Instances {
         unsafe { self.closest_with::<Avx2>(bvh, ray, tmax) }
     }
 
-    /// The closest hit with node test `N`.
+    /// The closest hit with node test `N`; `ray` from [`Self::start_ray`].
     ///
     /// # Safety
     /// As [`NodeTest::intersect`].
@@ -350,8 +363,7 @@ impl Instances {
         // SAFETY: forwarded from the caller.
         let best = unsafe {
             if self.single {
-                let local = self.local_ray(0, ray);
-                bvh.objects[0].closest::<N>(&local, &mut t).map(|(block, lane)| (0, block, lane, local.origin, local.direction))
+                bvh.objects[0].closest::<N>(ray, &mut t).map(|(block, lane)| (0, block, lane, ray.origin, ray.direction))
             } else {
                 let mut leaf = ClosestInstance::<N> { instances: self, bvh, ray, best: None, simd: PhantomData };
                 self.top.traverse_with::<N>(ray, &mut t, &mut leaf);
@@ -372,7 +384,7 @@ impl Instances {
     /// at the first hit found (children still visited nearest first: near blockers are the
     /// likely ones).
     pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
-        let ray = PreparedRay::new(origin.into(), dir.into(), tmin);
+        let ray = self.start_ray(origin, dir, tmin);
         match self.simd {
             // SAFETY: as in `closest_hit`.
             #[cfg(target_arch = "x86_64")]
@@ -390,7 +402,7 @@ impl Instances {
         unsafe { self.occluded_with::<Avx2>(bvh, ray, tmax) }
     }
 
-    /// The blocking object with node test `N`.
+    /// The blocking object with node test `N`; `ray` from [`Self::start_ray`].
     ///
     /// # Safety
     /// As [`NodeTest::intersect`].
@@ -399,7 +411,7 @@ impl Instances {
         // SAFETY: forwarded from the caller.
         unsafe {
             if self.single {
-                return bvh.objects[0].any::<N>(&self.local_ray(0, ray), tmax).then_some(0);
+                return bvh.objects[0].any::<N>(ray, tmax).then_some(0);
             }
             let mut t = tmax;
             let mut leaf = AnyInstance::<N> { instances: self, bvh, ray, blocker: None, simd: PhantomData };

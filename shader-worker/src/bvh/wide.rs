@@ -9,7 +9,7 @@
 //! halves without AVX2; [`super::node_test`]), children are visited nearest first (closest
 //! hit; one or two hit children without a sort) with far ones culled on pop once `tmax`
 //! shrinks, or in node order (any hit), and a leaf is one [`super::tri4`] block (≤ 4
-//! triangles in one SIMD test). Which binary nodes become wide nodes and leaves is chosen
+//! triangles in one watertight SIMD test). Which binary nodes become wide nodes and leaves is chosen
 //! by [`super::collapse`].
 use glam::Vec3A;
 use std::mem::MaybeUninit;
@@ -51,6 +51,12 @@ pub struct PreparedRay {
     pub(super) org_inv: [f32; 3],
     /// Per axis, the plane index (0 = min, 1 = max) that is near for this direction.
     pub(super) near: [usize; 3],
+    /// The triangle test's frame (Woop et al. 2013, §3): `[kx, ky, kz]` with `kz` the axis
+    /// along which the direction is largest, and the shear `[d[kx] / d[kz], d[ky] / d[kz],
+    /// 1 / d[kz]]` that makes the ray run along +z (the quotients as products with
+    /// `1 / d[kz]`).
+    pub(super) axes: [usize; 3],
+    pub(super) shear: [f32; 3],
     pub tmin: f32,
 }
 
@@ -75,12 +81,21 @@ impl PreparedRay {
     pub fn new(origin: Vec3A, direction: Vec3A, tmin: f32) -> PreparedRay {
         let inv = [slab_reciprocal(direction.x), slab_reciprocal(direction.y), slab_reciprocal(direction.z)];
         let o = origin.to_array();
+        let d = direction.to_array();
+        let a = direction.abs();
+        let kz = if a.x >= a.y && a.x >= a.z { 0 } else if a.y >= a.z { 1 } else { 2 };
+        // Swapped for a negative d[kz] so the frame keeps the triangles' winding.
+        let (kx, ky) = if d[kz] < 0.0 { ((kz + 2) % 3, (kz + 1) % 3) } else { ((kz + 1) % 3, (kz + 2) % 3) };
         PreparedRay {
             origin,
             direction,
             inv,
             org_inv: [o[0] * inv[0], o[1] * inv[1], o[2] * inv[2]],
             near: [(inv[0] < 0.0) as usize, (inv[1] < 0.0) as usize, (inv[2] < 0.0) as usize],
+            axes: [kx, ky, kz],
+            // 1 / d[kz] is the slab reciprocal already taken (never clamped: the largest
+            // component of a non-zero direction), so the shear costs no divide.
+            shear: [d[kx] * inv[kz], d[ky] * inv[kz], inv[kz]],
             tmin,
         }
     }
