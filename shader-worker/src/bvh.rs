@@ -381,8 +381,8 @@ impl Instances {
     }
 
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment. Stops
-    /// at the first hit found (children still visited nearest first: near blockers are the
-    /// likely ones).
+    /// at the first hit found (inside an object, children in node order: see
+    /// [`ObjectBvh::any`]).
     pub fn occluded(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<u32> {
         let ray = self.start_ray(origin, dir, tmin);
         match self.simd {

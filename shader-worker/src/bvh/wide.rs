@@ -9,8 +9,8 @@
 //! halves without AVX2; [`super::node_test`]), children are visited nearest first (closest
 //! hit; one or two hit children without a sort) with far ones culled on pop once `tmax`
 //! shrinks, or in node order (any hit), and a leaf is one [`super::tri4`] block (≤ 4
-//! triangles in one watertight SIMD test). Which binary nodes become wide nodes and leaves is chosen
-//! by [`super::collapse`].
+//! triangles in one watertight SIMD test). Which binary nodes become wide nodes and leaves
+//! is chosen by [`super::collapse`].
 use glam::Vec3A;
 use std::mem::MaybeUninit;
 use obvhs::aabb::Aabb;
@@ -93,8 +93,9 @@ impl PreparedRay {
             org_inv: [o[0] * inv[0], o[1] * inv[1], o[2] * inv[2]],
             near: [(inv[0] < 0.0) as usize, (inv[1] < 0.0) as usize, (inv[2] < 0.0) as usize],
             axes: [kx, ky, kz],
-            // 1 / d[kz] is the slab reciprocal already taken (never clamped: the largest
-            // component of a non-zero direction), so the shear costs no divide.
+            // 1 / d[kz] is the slab reciprocal already taken, so the shear costs no divide
+            // (clamped only for a direction shorter than 1e-30; the shear is still the same
+            // for every triangle the ray meets, which is all watertightness needs).
             shear: [d[kx] * inv[kz], d[ky] * inv[kz], inv[kz]],
             tmin,
         }
