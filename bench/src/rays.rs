@@ -14,7 +14,7 @@ mod workloads;
 use anyhow::{Context, Result};
 use edgepoint_scene::Mesh;
 use edgepoint_server::reference::LogProgress;
-use edgepoint_worker::{ray_oracle, Instances, SceneBvh};
+use edgepoint_worker::{ray_oracle, Instances, SceneBvh, Simd};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use serde_json::{json, Value};
@@ -213,6 +213,13 @@ pub fn run(a: RaysArgs) -> Result<()> {
     })?;
     let shape = worker.bvh.objects[0].shape();
     entries.push(Entry { name: "worker", tracer: Box::new(worker), build_ms: ms });
+    // The worker's traversal with the baseline instruction set (SSE), when the CPU's widest
+    // (AVX2 + FMA) is what "worker" runs: the same BVH, built again, untimed.
+    if Simd::detect() != Simd::Baseline {
+        let bvh = SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress);
+        let inst = Instances::new(&bvh, &[tf]).with_simd(Simd::Baseline);
+        entries.push(Entry { name: "worker_sse", tracer: Box::new(WorkerTracer { bvh, inst }), build_ms: vec![] });
+    }
     let (base, ms) = timed_builds(a.repeat, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
     entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms });
     #[cfg(feature = "embree")]
@@ -221,6 +228,8 @@ pub fn run(a: RaysArgs) -> Result<()> {
         let (e, ms) = timed_builds(a.repeat, || embree::EmbreeMesh::build(&world, &mesh.triangles, 1))?;
         entries.push(Entry { name: "embree3", tracer: Box::new(e), build_ms: ms });
     }
+
+    let base = entries.iter().position(|e| e.name == "baseline").context("the baseline tracer")?;
 
     // The workloads; the shadow rays start at the worker's primary hits.
     let primary = workloads::primary(lo, hi, a.resolution);
@@ -256,7 +265,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
             let issue = if threads == 1 { ISSUE_EMBREE_1T[wi] } else { ISSUE_EMBREE_2T[wi] };
             let issue_worker = if threads == 1 { ISSUE_WORKER_1T[wi] } else { ISSUE_WORKER_2T[wi] };
             let mut ratios = json!({
-                "worker_over_baseline": mrays[0] / mrays[1],
+                "worker_over_baseline": mrays[0] / mrays[base],
                 "worker_over_issue_embree44_low": mrays[0] / issue.0,
                 "worker_over_issue_embree44_high": mrays[0] / issue.1,
             });
@@ -266,12 +275,16 @@ pub fn run(a: RaysArgs) -> Result<()> {
                 threads,
                 if threads == 1 { " " } else { "s" },
                 mrays[0],
-                mrays[1],
-                mrays[0] / mrays[1],
+                mrays[base],
+                mrays[0] / mrays[base],
                 issue.0,
                 issue.1,
                 mrays[0] / issue.1
             ));
+            if let Some(k) = entries.iter().position(|e| e.name == "worker_sse") {
+                ratios["worker_over_worker_sse"] = json!(mrays[0] / mrays[k]);
+                table.push_str(&format!(", worker SSE {:6.2} ({:4.2}x)", mrays[k], mrays[0] / mrays[k]));
+            }
             if let Some(k) = entries.iter().position(|e| e.name == "embree3") {
                 ratios["worker_over_embree3_same_process"] = json!(mrays[0] / mrays[k]);
                 table.push_str(&format!(", Embree 3 here {:6.2} ({:4.2}x)", mrays[k], mrays[0] / mrays[k]));
@@ -303,11 +316,12 @@ pub fn run(a: RaysArgs) -> Result<()> {
     }
     let builds: serde_json::Map<_, _> = entries
         .iter()
+        .filter(|e| !e.build_ms.is_empty())
         .map(|e| (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms})))
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
     table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
-    table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
+    table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().filter(|e| !e.build_ms.is_empty()).map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
     let out = json!({
         "mesh": a.mesh.display().to_string(),
         "triangles": mesh.triangles.len(),
@@ -316,11 +330,12 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "repeat": a.repeat.max(1),
         "timing": "1 thread: CPU time of the tracing thread; 2 threads: wall clock; builds: process CPU time on a one-thread pool",
         "embree3_in_process": cfg!(feature = "embree"),
+        "worker_simd": format!("{:?}", Simd::detect()),
         "workloads": rows,
         "build_one_thread": builds,
         "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": {
-            "worker_over_baseline": wb / crate::stats::median(&entries[1].build_ms),
+            "worker_over_baseline": wb / crate::stats::median(&entries[base].build_ms),
             "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,
             "worker_over_issue_embree44_high": wb / ISSUE_EMBREE_BUILD_MS.1,
         },

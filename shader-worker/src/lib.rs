@@ -16,7 +16,7 @@ pub mod shader;
 pub mod surface;
 pub mod triples;
 
-pub use bvh::{BvhShape, Hit, Instances, SceneBvh};
+pub use bvh::{BvhShape, Hit, Instances, SceneBvh, Simd};
 pub use loaded::LoadedScene;
 pub use triples::sample_triples;
 pub use shader::{shade_batch, shade_batch_parts, Part, DirectParams, GiParams, GlossyParams, HybridParams, HitInfo, RayRequest, SampleOut, ShadeOutput, ShaderSpec, SHADERS};

@@ -2,7 +2,7 @@
 mod common_scenes;
 use common_scenes::*;
 use edgepoint_scene::{NoProgress, Scene};
-use edgepoint_worker::LoadedScene;
+use edgepoint_worker::{Instances, LoadedScene, Simd};
 use glam::{Affine3A, Quat, Vec3};
 
 use edgepoint_worker::ray_oracle::{barycentric_margin, ray_triangle as tri_t};
@@ -33,9 +33,25 @@ impl Lcg {
     }
 }
 
+/// The instruction sets this CPU runs: the traversal is checked with each.
+fn simds() -> Vec<Simd> {
+    let mut v = vec![Simd::Baseline];
+    if Simd::detect() != Simd::Baseline {
+        v.push(Simd::detect());
+    }
+    v
+}
+
 fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
     let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
-    let inst = loaded.instances(&tf);
+    for simd in simds() {
+        let inst = loaded.instances(&tf).with_simd(simd);
+        assert_eq!(inst.simd(), simd);
+        check_with(&scene, &tf, &loaded, &inst, rays, seed);
+    }
+}
+
+fn check_with(scene: &Scene, tf: &[Affine3A], loaded: &LoadedScene, inst: &Instances, rays: usize, seed: u64) {
     let (lo, hi) = scene.bounds();
     let c = (lo + hi) * 0.5;
     let r = (hi - lo).length();
@@ -46,7 +62,7 @@ fn check(scene: Scene, tf: Vec<Affine3A>, rays: usize, seed: u64) {
         // Aim near the scene so most rays hit something.
         let d = (c + rng.v(r * 0.3) - o).normalize();
         let got = inst.closest_hit(&loaded.bvh, o, d, 0.0, f32::INFINITY);
-        let want = brute(&scene, &tf, o, d);
+        let want = brute(scene, tf, o, d);
         match (got, want) {
             (None, None) => agree += 1,
             (Some(g), Some((wo, wt, t))) => {
@@ -246,7 +262,9 @@ fn axis_aligned_rays_hit_the_cornell_box_like_brute_force() {
     let floor = scene.object_id("floor").unwrap();
     for d in [Vec3::new(0.0, -1.0, 0.0), -Vec3::Y, Vec3::NEG_Y] {
         let h = inst.closest_hit(&loaded.bvh, Vec3::new(0.3, 0.1, 0.1), d, 0.0, f32::INFINITY);
-        assert_eq!(h.map(|h| (h.object, h.t)), Some((floor, 0.1)), "direction {d}");
+        // The distance within an ulp or two: the watertight test's t·det sums the corners'
+        // three terms, each rounded.
+        assert!(h.is_some_and(|h| h.object == floor && (h.t - 0.1).abs() <= 2.0 * f32::EPSILON * 0.1), "direction {d}: {h:?}");
     }
     assert!(check_axis_rays(&scene, &tf, 300, 11) > 2000);
     // The boxes turned by quarter turns about their centres (and scaled), the rest still.
@@ -312,9 +330,11 @@ fn random_triangle_soups_match_brute_force_closest_and_any_hit() {
         let scene = scene(objs, vec![], 0.0);
         let tf = vec![Affine3A::IDENTITY];
         let loaded = LoadedScene::build(scene.clone(), "t".into(), &NoProgress);
-        let inst = loaded.instances(&tf);
         let meshes: Vec<_> = scene.objects.iter().map(|o| o.mesh.as_ref()).collect();
-        for _ in 0..400 {
+        let insts: Vec<_> = simds().into_iter().map(|s| loaded.instances(&tf).with_simd(s)).collect();
+        for k in 0..800 {
+            // Each instruction set on alternate rays.
+            let inst = &insts[k % insts.len()];
             rays += 1;
             let o = rng.v(1.5);
             let d = (rng.v(1.0) - o * 0.5).normalize_or(Vec3::X);
@@ -372,7 +392,7 @@ fn dragon_matches_brute_force() {
     let mesh = dragon.mesh.clone();
     let tf = vec![dragon.transform];
     let bvh = edgepoint_worker::SceneBvh::build(&[mesh.as_ref()], &NoProgress);
-    let inst = edgepoint_worker::Instances::new(&bvh, &tf);
+    let insts: Vec<_> = simds().into_iter().map(|s| edgepoint_worker::Instances::new(&bvh, &tf).with_simd(s)).collect();
     let (lo, hi) = edgepoint_scene::geometry::transformed_box(&tf[0], mesh.bounds);
     let c = (lo + hi) * 0.5;
     let eye = c + Vec3::new(0.0, 0.0, 0.25);
@@ -389,7 +409,7 @@ fn dragon_matches_brute_force() {
     use rayon::prelude::*;
     let results: Vec<_> = rays.par_iter().map(|&(o, d)| (o, d, edgepoint_worker::ray_oracle::closest(&meshes, &tf, o, d, 0.0, f64::INFINITY))).collect();
     let mut hits = 0;
-    for (o, d, want) in results {
+    for ((o, d, want), inst) in results.into_iter().flat_map(|r| insts.iter().map(move |i| (r, i))) {
         let got = inst.closest_hit(&bvh, o, d, 0.0, f32::INFINITY);
         match (got, want) {
             (None, None) => {}
@@ -421,4 +441,117 @@ fn dragon_matches_brute_force() {
         }
     }
     assert!(hits >= 20, "{hits} of {} rays hit the dragon", rays.len());
+}
+
+/// What a ray aimed at a shared edge or corner must find: the hit at `t` (units of the unit
+/// direction `d`, from a closed form), nothing on segments that end just before it, and
+/// the same surface on segments that end just after it.
+fn check_crack_free(inst: &Instances, loaded: &LoadedScene, o: Vec3, d: Vec3, t: f64, ctx: &str) {
+    let g = inst.closest_hit(&loaded.bvh, o, d, 0.0, f32::INFINITY);
+    let g = g.unwrap_or_else(|| panic!("{ctx}: origin {o} direction {d} misses (a crack between neighbours), want t {t}"));
+    assert!((g.t as f64 - t).abs() <= 1e-5 * t, "{ctx}: origin {o} direction {d}: t {} vs {t}", g.t);
+    let (before, after) = ((t * (1.0 - 1e-4)) as f32, (t * (1.0 + 1e-4)) as f32);
+    assert!(inst.occluded(&loaded.bvh, o, d, 0.0, before).is_none(), "{ctx}: origin {o} direction {d}: blocked before the hit at {t}");
+    assert!(inst.closest_hit(&loaded.bvh, o, d, 0.0, before).is_none(), "{ctx}: origin {o} direction {d}: a hit before {t}");
+    assert!(inst.occluded(&loaded.bvh, o, d, 0.0, after).is_some(), "{ctx}: origin {o} direction {d}: not blocked past the hit at {t}");
+}
+
+/// Rays aimed exactly at the edges and corners neighbouring triangles share must hit: a
+/// flat floor of two triangles sharing a diagonal (the direct shader's lit floor: with
+/// fused multiply-adds, Möller–Trumbore rejected its centre, which lies on the diagonal,
+/// in both triangles, and the camera ray saw the background), a fan of triangles around
+/// one corner, and a closed sphere aimed at its vertices and edge midpoints. Distances
+/// against closed forms (the floor's plane; the aimed-at point), any-hit queries on
+/// segments ending just before and after the hit, and shadow rays leaving just above the
+/// floor never blocked by it. With one object (queries skip the top level) and with a
+/// second object beside it (they do not), on every instruction set.
+#[test]
+fn rays_at_shared_edges_and_corners_hit_without_cracks() {
+    use edgepoint_scene::builtin::shapes;
+    let mut rng = Lcg(2026);
+    for half in [10.0f32, 1.3] {
+        for with_other in [false, true] {
+            let mut objs = vec![object("floor", quad(0.0, half, true), 0.5)];
+            if with_other {
+                objs.push(object("far", sphere(4, 6), 0.5));
+            }
+            let n_objs = objs.len();
+            let scene = scene(objs, vec![], 0.0);
+            let mut tf = vec![Affine3A::IDENTITY; n_objs];
+            if with_other {
+                tf[1] = Affine3A::from_translation(Vec3::new(0.0, -50.0, 0.0));
+            }
+            let loaded = LoadedScene::build(scene, "t".into(), &NoProgress);
+            for simd in simds() {
+                let inst = loaded.instances(&tf).with_simd(simd);
+                let ctx = format!("floor {half}, {n_objs} objects, {simd:?}");
+                // The failing shader test's ray, then points on the diagonal (exact in f32)
+                // from above and below.
+                let mut rays = vec![(Vec3::new(0.1, 2.0, 0.3), Vec3::ZERO)];
+                for k in -63..=63 {
+                    let s = half * 0.9 * k as f32 / 64.0;
+                    let mut o = Vec3::new(rng.f() * 4.0 - 2.0, 0.2 + rng.f() * 3.0, rng.f() * 4.0 - 2.0);
+                    if k % 3 == 0 {
+                        o.y = -o.y;
+                    }
+                    rays.push((o, Vec3::new(s, 0.0, s)));
+                }
+                for (o, target) in rays {
+                    let d = (target - o).normalize();
+                    let t = -(o.y as f64) / d.y as f64;
+                    check_crack_free(&inst, &loaded, o, d, t, &ctx);
+                    // Shadow rays from just off the floor, away from it, are never blocked.
+                    let p = o + d * t as f32;
+                    let side = -o.y.signum();
+                    let lifted = p - Vec3::Y * side * 1e-4;
+                    let away = (rng.v(1.0) - Vec3::Y * side * 1.5).normalize();
+                    assert!(inst.occluded(&loaded.bvh, lifted, away, 0.0, 1e3).is_none(), "{ctx}: shadow ray from {lifted} along {away} blocked");
+                    assert!(inst.closest_hit(&loaded.bvh, lifted, away, 0.0, 1e3).is_none(), "{ctx}: shadow ray from {lifted} along {away} hits");
+                }
+            }
+        }
+    }
+    // A fan around corner 0 (its shared edges run from it), a cuboid and a closed sphere.
+    // The fan closes around its hub (corner 0), so the hub and its spokes are inside it;
+    // its rim corners are not aimed at (a ray there may pass just outside).
+    let mut corners = vec![Vec3::new(0.0, 0.3, 0.0)];
+    corners.extend((0..9).map(|i| {
+        let a = i as f32 * std::f32::consts::TAU / 9.0;
+        Vec3::new(a.cos() * (1.0 + 0.1 * i as f32), 0.05 * i as f32, a.sin())
+    }));
+    let fan = edgepoint_scene::Mesh::from_triangles(corners, (1..10).map(|i| [0, i, i % 9 + 1]).collect(), &NoProgress);
+    let cuboid = shapes::cuboid(Vec3::new(-0.4, -0.2, -0.3), Vec3::new(0.4, 0.2, 0.3));
+    for (mesh, closed) in [(fan, false), (cuboid, true), (sphere(12, 16), true)] {
+        let scene = scene(vec![object("m", mesh.clone(), 0.5)], vec![], 0.0);
+        let tf = vec![Affine3A::IDENTITY];
+        let loaded = LoadedScene::build(scene, "t".into(), &NoProgress);
+        // Shared corners and points of shared edges (within rounding of the edge). Not the
+        // UV sphere's south pole: its ring of corners there is sin(π) ≈ 9e-8 wide in f32, a
+        // real hole.
+        let mut targets = Vec::new();
+        for tri in &mesh.triangles {
+            for e in 0..3 {
+                let (a, b) = (mesh.positions[tri[e] as usize], mesh.positions[tri[(e + 1) % 3] as usize]);
+                let shared = mesh.triangles.iter().filter(|u| u.contains(&tri[e]) && u.contains(&tri[(e + 1) % 3])).count() > 1;
+                if shared && a.y.min(b.y) > -0.999 {
+                    targets.extend([(a + b) * 0.5, a + (b - a) * 0.3]);
+                    if closed || tri[e] == 0 {
+                        targets.push(a);
+                    }
+                }
+            }
+        }
+        for simd in simds() {
+            let inst = loaded.instances(&tf).with_simd(simd);
+            let ctx = format!("{} triangles, {simd:?}", mesh.triangles.len());
+            for &q in &targets {
+                // From outside a closed convex mesh around the centre, about along the
+                // point's own direction (it is then the first thing met), or from above and
+                // below the fan.
+                let o = if closed { q * 3.0 + rng.v(0.1) } else { q + Vec3::new(rng.f() - 0.5, if rng.f() < 0.5 { 2.0 } else { -2.0 }, rng.f() - 0.5) };
+                let d = (q - o).normalize();
+                check_crack_free(&inst, &loaded, o, d, (q - o).length() as f64, &ctx);
+            }
+        }
+    }
 }

@@ -1,14 +1,26 @@
-//! Leaf triangles four to a block in structure-of-arrays layout (vertex 0, edges 1 and 2,
-//! each coordinate as 4 lanes), intersected together by Möller–Trumbore written lane-wise
-//! so the compiler turns it into one SIMD test. Unused lanes are degenerate (zero edges:
-//! determinant 0, never a hit).
-use glam::{Vec3, Vec3A};
+//! Leaf triangles four to a block in structure-of-arrays layout (the three corners, each
+//! coordinate as 4 lanes), intersected together by one 4-lane watertight test ([`TriTest`]:
+//! SSE, or with fused multiply-adds where the CPU has FMA): Woop, Benthin and Wald,
+//! "Watertight Ray/Triangle Intersection" (JCGT 2(1), 2013), §3. Watertight because each
+//! edge's test is a function of that edge's two corners only (relative to the ray's origin,
+//! in the ray's sheared frame), computed so that swapping the corners negates it exactly:
+//! the two triangles sharing an edge see the same value with opposite signs, so a ray
+//! through the edge is inside one of them (or on both). Möller–Trumbore, the test before,
+//! measures both barycentrics from one corner, so neighbours round the shared edge
+//! differently: with fused multiply-adds it let a camera ray aimed at the centre of a floor
+//! of two triangles (on their shared diagonal) through both. Unused lanes have three equal
+//! corners (every edge function 0, determinant 0: never a hit).
+#[cfg(target_arch = "x86_64")]
+use super::node_test::Avx2;
+use super::node_test::Baseline;
+use super::wide::PreparedRay;
+use glam::Vec3;
 
 /// Up to four triangles and their indices in the mesh (`u32::MAX` in unused lanes).
 #[derive(Clone, Copy)]
 #[repr(C, align(16))]
 pub struct Tri4 {
-    /// v0.x, v0.y, v0.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z — 4 lanes each.
+    /// a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z — 4 lanes each.
     c: [[f32; 4]; 9],
     pub tri: [u32; 4],
 }
@@ -18,9 +30,8 @@ impl Tri4 {
     pub fn new(tris: &[(u32, [Vec3; 3])]) -> Tri4 {
         assert!(tris.len() <= 4, "a Tri4 block holds at most 4 triangles");
         let mut block = Tri4 { c: [[0.0; 4]; 9], tri: [u32::MAX; 4] };
-        for (lane, (tri, [a, b, c])) in tris.iter().enumerate() {
-            let (e1, e2) = (*b - *a, *c - *a);
-            for (k, v) in [a.x, a.y, a.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z].into_iter().enumerate() {
+        for (lane, (tri, corners)) in tris.iter().enumerate() {
+            for (k, v) in corners.iter().flat_map(|v| v.to_array()).enumerate() {
                 block.c[k][lane] = v;
             }
             block.tri[lane] = *tri;
@@ -28,22 +39,29 @@ impl Tri4 {
         block
     }
 
+    fn corner(&self, corner: usize, lane: usize) -> Vec3 {
+        let c = &self.c;
+        Vec3::new(c[3 * corner][lane], c[3 * corner + 1][lane], c[3 * corner + 2][lane])
+    }
+
     /// The unit geometric normal of the triangle in `lane` (mesh winding), computed exactly
     /// as the mesh computes its face normals (`(b - a) × (c - a)`, normalised) from the
-    /// same edges, so it equals `Mesh::face_normals` bit for bit; read from the block the
+    /// same corners, so it equals `Mesh::face_normals` bit for bit; read from the block the
     /// hit just loaded rather than from a normal array that would be one more cache miss.
     #[inline]
     pub fn normal(&self, lane: usize) -> Vec3 {
-        let c = &self.c;
-        let e1 = Vec3::new(c[3][lane], c[4][lane], c[5][lane]);
-        let e2 = Vec3::new(c[6][lane], c[7][lane], c[8][lane]);
-        e1.cross(e2).normalize_or_zero()
+        let a = self.corner(0, lane);
+        (self.corner(1, lane) - a).cross(self.corner(2, lane) - a).normalize_or_zero()
     }
 
-    /// The nearest lane hit with `tmin <= t <= tmax`: (lane, t).
+    /// The nearest lane hit with `ray.tmin <= t <= tmax`: (lane, t), tested with `K`.
+    ///
+    /// # Safety
+    /// As [`TriTest::distances`].
     #[inline(always)]
-    pub fn intersect(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<(usize, f32)> {
-        let (t, mut mask) = self.distances(o, d, tmin, tmax);
+    pub unsafe fn intersect<K: TriTest>(&self, ray: &PreparedRay, tmax: f32) -> Option<(usize, f32)> {
+        // SAFETY: forwarded from the caller.
+        let (t, mut mask) = unsafe { K::distances(self, ray, tmax) };
         let mut best: Option<(usize, f32)> = None;
         while mask != 0 {
             let lane = mask.trailing_zeros() as usize;
@@ -55,116 +73,158 @@ impl Tri4 {
         best
     }
 
-    /// Whether any lane is hit with `tmin <= t <= tmax`.
+    /// Whether any lane is hit with `ray.tmin <= t <= tmax`, tested with `K`.
+    ///
+    /// # Safety
+    /// As [`TriTest::distances`].
     #[inline(always)]
-    pub fn any(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> bool {
-        self.distances(o, d, tmin, tmax).1 != 0
+    pub unsafe fn any<K: TriTest>(&self, ray: &PreparedRay, tmax: f32) -> bool {
+        // SAFETY: forwarded from the caller.
+        unsafe { K::distances(self, ray, tmax).1 != 0 }
     }
 
-    /// Per lane, the hit distance, and the mask of lanes hit with `tmin <= t <= tmax`:
-    /// the SSE form (x86-64 always has SSE2).
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    fn distances(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 is part of the x86-64 baseline; `c` is 16-byte aligned (repr align).
-        unsafe {
-            let ld = |k: usize| _mm_load_ps(self.c[k].as_ptr());
-            let (dx, dy, dz) = (_mm_set1_ps(d.x), _mm_set1_ps(d.y), _mm_set1_ps(d.z));
-            let (e1x, e1y, e1z) = (ld(3), ld(4), ld(5));
-            let (e2x, e2y, e2z) = (ld(6), ld(7), ld(8));
-            let sub = |a, b| _mm_sub_ps(a, b);
-            let mul = |a, b| _mm_mul_ps(a, b);
-            let add = |a, b| _mm_add_ps(a, b);
-            let px = sub(mul(dy, e2z), mul(dz, e2y));
-            let py = sub(mul(dz, e2x), mul(dx, e2z));
-            let pz = sub(mul(dx, e2y), mul(dy, e2x));
-            let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
-            // Unnormalised barycentrics and distance with the determinant's sign folded in:
-            // no division unless some lane is hit.
-            let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
-            let abs_det = _mm_xor_ps(det, sign);
-            let sx = sub(_mm_set1_ps(o.x), ld(0));
-            let sy = sub(_mm_set1_ps(o.y), ld(1));
-            let sz = sub(_mm_set1_ps(o.z), ld(2));
-            let u = _mm_xor_ps(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), sign);
-            let qx = sub(mul(sy, e1z), mul(sz, e1y));
-            let qy = sub(mul(sz, e1x), mul(sx, e1z));
-            let qz = sub(mul(sx, e1y), mul(sy, e1x));
-            let v = _mm_xor_ps(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), sign);
-            let tt = _mm_xor_ps(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), sign);
-            let zero = _mm_setzero_ps();
-            // Ordered comparisons: NaN fails each of them.
-            let mut m = _mm_cmpgt_ps(abs_det, zero);
-            m = _mm_and_ps(m, _mm_cmpge_ps(u, zero));
-            m = _mm_and_ps(m, _mm_cmpge_ps(v, zero));
-            m = _mm_and_ps(m, _mm_cmple_ps(add(u, v), abs_det));
-            let mut out = [0f32; 4];
-            if _mm_movemask_ps(m) == 0 {
-                return (out, 0);
-            }
-            let t = _mm_div_ps(tt, abs_det);
-            m = _mm_and_ps(m, _mm_cmpge_ps(t, _mm_set1_ps(tmin)));
-            m = _mm_and_ps(m, _mm_cmple_ps(t, _mm_set1_ps(tmax)));
-            _mm_storeu_ps(out.as_mut_ptr(), t);
-            (out, _mm_movemask_ps(m) as u32)
-        }
-    }
-
-    /// The same test lane by lane, for targets without SSE (and as the reference the SSE
-    /// form is tested against).
+    /// The test lane by lane with separate multiplies and adds: the reference the SSE form
+    /// equals bit for bit, and the form on targets without SSE. `fused` computes the shear
+    /// and the distance's dot product with one rounding per multiply-add (`mul_add`), as
+    /// the FMA form does, which it equals bit for bit then. The edge functions are never
+    /// fused: `x·y − z·w` fused is not negated exactly by swapping the corners.
     #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
     #[inline(always)]
-    fn distances_scalar(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
+    fn distances_scalar(&self, ray: &PreparedRay, tmax: f32, fused: bool) -> ([f32; 4], u32) {
+        let fma = |a: f32, b: f32, c: f32| if fused { a.mul_add(b, c) } else { a * b + c };
+        let [kx, ky, kz] = ray.axes;
+        let o = ray.origin.to_array();
+        let [sx, sy, sz] = ray.shear;
         let c = &self.c;
         let mut out = [0f32; 4];
-        let mut hit = [false; 4];
+        let mut mask = 0;
         for i in 0..4 {
-            let (e1x, e1y, e1z) = (c[3][i], c[4][i], c[5][i]);
-            let (e2x, e2y, e2z) = (c[6][i], c[7][i], c[8][i]);
-            // p = d × e2, det = e1 · p
-            let px = d.y * e2z - d.z * e2y;
-            let py = d.z * e2x - d.x * e2z;
-            let pz = d.x * e2y - d.y * e2x;
-            let det = e1x * px + e1y * py + e1z * pz;
-            // Unnormalised barycentrics and distance with the determinant's sign folded in.
+            // Corner j in the ray's frame: origin at the ray's, sheared so the ray runs
+            // along +z (z not yet scaled).
+            let corner = |j: usize| {
+                let z = c[3 * j + kz][i] - o[kz];
+                (fma(-sx, z, c[3 * j + kx][i] - o[kx]), fma(-sy, z, c[3 * j + ky][i] - o[ky]), z)
+            };
+            let (a, b, cc) = (corner(0), corner(1), corner(2));
+            // Edge functions (twice the signed areas seen along the ray), unfused.
+            let u = cc.0 * b.1 - cc.1 * b.0;
+            let v = a.0 * cc.1 - a.1 * cc.0;
+            let w = b.0 * a.1 - b.1 * a.0;
+            let det = u + v + w;
             let sign = if det.is_sign_negative() { -1.0 } else { 1.0 };
             let abs_det = det * sign;
-            // s = o - v0, u = (s · p) · sign
-            let sx = o.x - c[0][i];
-            let sy = o.y - c[1][i];
-            let sz = o.z - c[2][i];
-            let u = (sx * px + sy * py + sz * pz) * sign;
-            // q = s × e1, v = (d · q) · sign, t = (e2 · q) · sign / |det|
-            let qx = sy * e1z - sz * e1y;
-            let qy = sz * e1x - sx * e1z;
-            let qz = sx * e1y - sy * e1x;
-            let v = (d.x * qx + d.y * qy + d.z * qz) * sign;
-            let t = (e2x * qx + e2y * qy + e2z * qz) * sign / abs_det;
-            // NaN fails every comparison.
-            hit[i] = abs_det > 0.0 && u >= 0.0 && v >= 0.0 && u + v <= abs_det && t >= tmin && t <= tmax;
-            out[i] = t;
-        }
-        let mut mask = 0;
-        for (i, h) in hit.iter().enumerate() {
-            mask |= (*h as u32) << i;
+            // t · det = u·a.z + v·b.z + w·c.z (z scaled by 1 / d[kz]).
+            let tt = fma(w, sz * cc.2, fma(v, sz * b.2, u * (sz * a.2))) * sign;
+            // NaN fails every comparison; the distance is tested before dividing by |det|.
+            if abs_det > 0.0 && u * sign >= 0.0 && v * sign >= 0.0 && w * sign >= 0.0 && tt >= abs_det * ray.tmin && tt <= abs_det * tmax {
+                mask |= 1 << i;
+                // Clamped: the range was tested on t · |det|, so the quotient may round an
+                // ulp outside it.
+                out[i] = (tt / abs_det).max(ray.tmin).min(tmax);
+            }
         }
         (out, mask)
     }
+}
 
-    #[cfg(not(target_arch = "x86_64"))]
+/// One 4-lane watertight triangle test (the module's; the determinant's sign folded into
+/// the edge functions and the distance, and the distance range tested before dividing, as
+/// Embree does): per lane the hit distance, and the mask of lanes hit with
+/// `ray.tmin <= t <= tmax`. Both faces count.
+pub trait TriTest {
+    /// # Safety
+    /// The CPU must support the instructions the implementation uses, and the caller must
+    /// be compiled with them enabled (inside a `#[target_feature]` function).
+    unsafe fn distances(block: &Tri4, ray: &PreparedRay, tmax: f32) -> ([f32; 4], u32);
+}
+
+/// The SSE form (x86-64 always has SSE2), or the FMA form: the same operations, the shear
+/// and the distance's multiply-adds fused in the FMA form.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn distances_sse<const FUSED: bool>(block: &Tri4, ray: &PreparedRay, tmax: f32) -> ([f32; 4], u32) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86-64 baseline, FMA guaranteed by the caller when
+    // FUSED; `c` is 16-byte aligned (repr align).
+    unsafe {
+        let ld = |k: usize| _mm_load_ps(block.c[k].as_ptr());
+        let fma = |a, b, c| if FUSED { _mm_fmadd_ps(a, b, c) } else { _mm_add_ps(_mm_mul_ps(a, b), c) };
+        // c − a·b
+        let fnma = |a, b, c| if FUSED { _mm_fnmadd_ps(a, b, c) } else { _mm_sub_ps(c, _mm_mul_ps(a, b)) };
+        let [kx, ky, kz] = ray.axes;
+        let o = ray.origin.to_array();
+        let (ox, oy, oz) = (_mm_set1_ps(o[kx]), _mm_set1_ps(o[ky]), _mm_set1_ps(o[kz]));
+        let (sx, sy, sz) = (_mm_set1_ps(ray.shear[0]), _mm_set1_ps(ray.shear[1]), _mm_set1_ps(ray.shear[2]));
+        let corner = |j: usize| {
+            let z = _mm_sub_ps(ld(3 * j + kz), oz);
+            (fnma(sx, z, _mm_sub_ps(ld(3 * j + kx), ox)), fnma(sy, z, _mm_sub_ps(ld(3 * j + ky), oy)), z)
+        };
+        let (a, b, c) = (corner(0), corner(1), corner(2));
+        // Never fused (see `distances_scalar`).
+        let edge = |p: (__m128, __m128, __m128), q: (__m128, __m128, __m128)| _mm_sub_ps(_mm_mul_ps(p.0, q.1), _mm_mul_ps(p.1, q.0));
+        let u = edge(c, b);
+        let v = edge(a, c);
+        let w = edge(b, a);
+        let det = _mm_add_ps(_mm_add_ps(u, v), w);
+        let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
+        let abs_det = _mm_xor_ps(det, sign);
+        let tt = _mm_xor_ps(fma(w, _mm_mul_ps(sz, c.2), fma(v, _mm_mul_ps(sz, b.2), _mm_mul_ps(u, _mm_mul_ps(sz, a.2)))), sign);
+        let zero = _mm_setzero_ps();
+        // Ordered comparisons: NaN fails each of them.
+        let mut m = _mm_cmpgt_ps(abs_det, zero);
+        m = _mm_and_ps(m, _mm_cmpge_ps(_mm_xor_ps(u, sign), zero));
+        m = _mm_and_ps(m, _mm_cmpge_ps(_mm_xor_ps(v, sign), zero));
+        m = _mm_and_ps(m, _mm_cmpge_ps(_mm_xor_ps(w, sign), zero));
+        m = _mm_and_ps(m, _mm_cmpge_ps(tt, _mm_mul_ps(abs_det, _mm_set1_ps(ray.tmin))));
+        m = _mm_and_ps(m, _mm_cmple_ps(tt, _mm_mul_ps(abs_det, _mm_set1_ps(tmax))));
+        let mut out = [0f32; 4];
+        let mask = _mm_movemask_ps(m) as u32;
+        // Divide only when some lane is hit (a minority of the blocks a ray visits).
+        if mask != 0 {
+            // Clamped as in the scalar form.
+            let t = _mm_min_ps(_mm_max_ps(_mm_div_ps(tt, abs_det), _mm_set1_ps(ray.tmin)), _mm_set1_ps(tmax));
+            _mm_storeu_ps(out.as_mut_ptr(), t);
+        }
+        (out, mask)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TriTest for Baseline {
     #[inline(always)]
-    fn distances(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
-        self.distances_scalar(o, d, tmin, tmax)
+    unsafe fn distances(block: &Tri4, ray: &PreparedRay, tmax: f32) -> ([f32; 4], u32) {
+        // SAFETY: SSE only.
+        unsafe { distances_sse::<false>(block, ray, tmax) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TriTest for Avx2 {
+    #[inline(always)]
+    unsafe fn distances(block: &Tri4, ray: &PreparedRay, tmax: f32) -> ([f32; 4], u32) {
+        // SAFETY: the caller guarantees FMA.
+        unsafe { distances_sse::<true>(block, ray, tmax) }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl TriTest for Baseline {
+    #[inline(always)]
+    unsafe fn distances(block: &Tri4, ray: &PreparedRay, tmax: f32) -> ([f32; 4], u32) {
+        block.distances_scalar(ray, tmax, false)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3A;
+
+    type Distances = ([f32; 4], u32);
 
     /// The SSE test and the lane-by-lane one agree bit for bit on random triangles and
-    /// rays (the same operations in the same order), including empty lanes.
+    /// rays (the same operations in the same order), including empty lanes; so do the FMA
+    /// test and the lane-by-lane one with fused multiply-adds, where the CPU has FMA.
     #[test]
     fn simd_and_scalar_agree() {
         let mut s = 12345u64;
@@ -180,17 +240,30 @@ mod tests {
             let o = Vec3A::from(v() * 2.0);
             // Aim near the first triangle so most rays hit something.
             let [a, b, c] = tris[0].1;
-            let d = Vec3A::from((a + b + c) / 3.0 + v() * 0.3) - o;
-            let (ta, ma) = block.distances(o, d, 0.0, f32::INFINITY);
-            let (tb, mb) = block.distances_scalar(o, d, 0.0, f32::INFINITY);
-            assert_eq!(ma, mb);
-            for lane in 0..4 {
-                if ma & (1 << lane) != 0 {
-                    assert_eq!(ta[lane].to_bits(), tb[lane].to_bits());
-                    hits += 1;
+            let ray = PreparedRay::new(o, Vec3A::from((a + b + c) / 3.0 + v() * 0.3) - o, 0.0);
+            // A finite tmax on some rays so the distance test is exercised too.
+            let tmax = if n % 3 == 0 { 1.0 } else { f32::INFINITY };
+            // (name, the SIMD test's distances and mask, the lane-by-lane ones)
+            let mut forms: Vec<(&str, Distances, Distances)> = Vec::new();
+            // SAFETY: SSE is baseline on x86-64; FMA is only run when detected.
+            #[cfg(target_arch = "x86_64")]
+            unsafe {
+                forms.push(("sse", Baseline::distances(&block, &ray, tmax), block.distances_scalar(&ray, tmax, false)));
+                if crate::bvh::Simd::Avx2.supported() {
+                    forms.push(("fma", Avx2::distances(&block, &ray, tmax), block.distances_scalar(&ray, tmax, true)));
                 }
             }
-            assert_eq!(ma >> tris.len(), 0, "empty lanes never hit");
+            for (name, (ta, ma), (tb, mb)) in forms {
+                assert_eq!(ma, mb, "{name}");
+                for lane in 0..4 {
+                    if ma & (1 << lane) != 0 {
+                        assert_eq!(ta[lane].to_bits(), tb[lane].to_bits(), "{name}");
+                        assert!(ta[lane] <= tmax, "{name}");
+                        hits += 1;
+                    }
+                }
+                assert_eq!(ma >> tris.len(), 0, "empty lanes never hit");
+            }
         }
         assert!(hits > 8000, "{hits} hits");
     }

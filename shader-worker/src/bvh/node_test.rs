@@ -1,0 +1,153 @@
+//! The 8-child slab test of a [`Node8`] (Kay and Kajiya's slabs, Williams et al.'s sign
+//! trick: per axis the near plane is picked once per ray, so no per-child min/max of the
+//! two slab distances), in the instruction sets the worker chooses from at run time: AVX2
+//! with FMA — all 8 children in one pass, each slab distance one fused multiply-subtract —
+//! and SSE, the x86-64 baseline, in two halves of 4 (plus a scalar form elsewhere).
+//! The traversal is generic over [`NodeTest`]; [`Simd`] says which one a query runs.
+use super::wide::{Node8, PreparedRay, EXIT_SLACK};
+
+/// The instruction set a traversal runs with, detected once per process ([`Simd::detect`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simd {
+    /// SSE on x86-64 (always present), scalar code elsewhere.
+    Baseline,
+    /// AVX2 and FMA (x86-64 only, when the CPU has both).
+    Avx2,
+}
+
+impl Simd {
+    /// The widest instruction set this CPU runs: AVX2 if it has AVX2 and FMA.
+    pub fn detect() -> Simd {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                return Simd::Avx2;
+            }
+        }
+        Simd::Baseline
+    }
+
+    /// Whether this CPU can run `self`.
+    pub fn supported(self) -> bool {
+        match self {
+            Simd::Baseline => true,
+            Simd::Avx2 => Simd::detect() == Simd::Avx2,
+        }
+    }
+}
+
+/// One 8-child slab test.
+pub trait NodeTest {
+    /// Entry distances of the 8 children and the mask of those the ray's `[tmin, tmax]`
+    /// meets (an exit distance widened by [`EXIT_SLACK`]).
+    ///
+    /// # Safety
+    /// The CPU must support the instructions the implementation uses, and the caller must
+    /// be compiled with them enabled (inside a `#[target_feature]` function) for the
+    /// intrinsics to inline.
+    unsafe fn intersect(node: &Node8, r: &PreparedRay, tmax: f32) -> ([f32; 8], u32);
+}
+
+/// The baseline test: SSE on x86-64 (two halves of 4 children), scalar elsewhere.
+pub struct Baseline;
+
+/// AVX2 + FMA: the 8 children in one 8-lane pass.
+#[cfg(target_arch = "x86_64")]
+pub struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeTest for Baseline {
+    #[inline(always)]
+    unsafe fn intersect(node: &Node8, r: &PreparedRay, tmax: f32) -> ([f32; 8], u32) {
+        use std::arch::x86_64::*;
+        let p = &node.planes;
+        let (nx, ny, nz) = (r.near[0], r.near[1], r.near[2]);
+        let mut tnear = [0f32; 8];
+        let mut mask = 0u32;
+        // SAFETY: SSE2 is part of the x86-64 baseline; every load reads 4 floats inside an
+        // 8-float plane at offset 0 or 4 (unaligned loads, so alignment does not matter).
+        unsafe {
+            let (ix, iy, iz) = (_mm_set1_ps(r.inv[0]), _mm_set1_ps(r.inv[1]), _mm_set1_ps(r.inv[2]));
+            let (ox, oy, oz) = (_mm_set1_ps(r.org_inv[0]), _mm_set1_ps(r.org_inv[1]), _mm_set1_ps(r.org_inv[2]));
+            let (t_min, t_max) = (_mm_set1_ps(r.tmin), _mm_set1_ps(tmax));
+            let slack = _mm_set1_ps(EXIT_SLACK);
+            for h in 0..2 {
+                let ld = |k: usize| _mm_loadu_ps(p[k].as_ptr().add(4 * h));
+                let slab = |k: usize, inv, oi| _mm_sub_ps(_mm_mul_ps(ld(k), inv), oi);
+                let t0 = _mm_max_ps(_mm_max_ps(slab(nx, ix, ox), slab(2 + ny, iy, oy)), _mm_max_ps(slab(4 + nz, iz, oz), t_min));
+                let t1 = _mm_min_ps(_mm_min_ps(slab(1 - nx, ix, ox), slab(3 - ny, iy, oy)), _mm_min_ps(slab(5 - nz, iz, oz), t_max));
+                let hit = _mm_cmple_ps(t0, _mm_mul_ps(t1, slack));
+                _mm_storeu_ps(tnear.as_mut_ptr().add(4 * h), t0);
+                mask |= (_mm_movemask_ps(hit) as u32) << (4 * h);
+            }
+        }
+        (tnear, mask)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl NodeTest for Avx2 {
+    #[inline(always)]
+    unsafe fn intersect(node: &Node8, r: &PreparedRay, tmax: f32) -> ([f32; 8], u32) {
+        use std::arch::x86_64::*;
+        let p = &node.planes;
+        let (nx, ny, nz) = (r.near[0], r.near[1], r.near[2]);
+        let mut tnear = [0f32; 8];
+        // SAFETY: the caller guarantees AVX2 and FMA; each plane is 32 bytes at a 32-byte
+        // multiple inside a 64-byte aligned node, so the aligned loads are aligned.
+        unsafe {
+            let (ix, iy, iz) = (_mm256_set1_ps(r.inv[0]), _mm256_set1_ps(r.inv[1]), _mm256_set1_ps(r.inv[2]));
+            let (ox, oy, oz) = (_mm256_set1_ps(r.org_inv[0]), _mm256_set1_ps(r.org_inv[1]), _mm256_set1_ps(r.org_inv[2]));
+            let ld = |k: usize| _mm256_load_ps(p[k].as_ptr());
+            // plane · inv − origin · inv with one rounding: at least as close as the SSE
+            // form's two, so the same exit slack covers it.
+            let slab = |k: usize, inv, oi| _mm256_fmsub_ps(ld(k), inv, oi);
+            let t0 = _mm256_max_ps(_mm256_max_ps(slab(nx, ix, ox), slab(2 + ny, iy, oy)), _mm256_max_ps(slab(4 + nz, iz, oz), _mm256_set1_ps(r.tmin)));
+            let t1 = _mm256_min_ps(_mm256_min_ps(slab(1 - nx, ix, ox), slab(3 - ny, iy, oy)), _mm256_min_ps(slab(5 - nz, iz, oz), _mm256_set1_ps(tmax)));
+            let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, _mm256_mul_ps(t1, _mm256_set1_ps(EXIT_SLACK)));
+            _mm256_storeu_ps(tnear.as_mut_ptr(), t0);
+            (tnear, _mm256_movemask_ps(hit) as u32)
+        }
+    }
+}
+
+/// `a.max(b)` without `f32::max`'s NaN rule (no NaN reaches the slab test).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The same test child by child, for targets without SSE.
+#[cfg(not(target_arch = "x86_64"))]
+impl NodeTest for Baseline {
+    #[inline(always)]
+    unsafe fn intersect(node: &Node8, r: &PreparedRay, tmax: f32) -> ([f32; 8], u32) {
+        let p = &node.planes;
+        let (nx, ny, nz) = (r.near[0], r.near[1], r.near[2]);
+        let (xn, xf) = (&p[nx], &p[1 - nx]);
+        let (yn, yf) = (&p[2 + ny], &p[3 - ny]);
+        let (zn, zf) = (&p[4 + nz], &p[5 - nz]);
+        let mut tnear = [0f32; 8];
+        let mut mask = 0u32;
+        for i in 0..8 {
+            let tx0 = xn[i] * r.inv[0] - r.org_inv[0];
+            let ty0 = yn[i] * r.inv[1] - r.org_inv[1];
+            let tz0 = zn[i] * r.inv[2] - r.org_inv[2];
+            let tx1 = xf[i] * r.inv[0] - r.org_inv[0];
+            let ty1 = yf[i] * r.inv[1] - r.org_inv[1];
+            let tz1 = zf[i] * r.inv[2] - r.org_inv[2];
+            let t0 = max(max(tx0, ty0), max(tz0, r.tmin));
+            let t1 = min(min(tx1, ty1), min(tz1, tmax)) * EXIT_SLACK;
+            tnear[i] = t0;
+            mask |= ((t0 <= t1) as u32) << i;
+        }
+        (tnear, mask)
+    }
+}
