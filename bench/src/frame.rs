@@ -147,11 +147,7 @@ pub struct ReferenceArgs {
     pub json: bool,
 }
 
-pub fn parse_param(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
-    let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
-    Ok((k.trim().to_string(), v))
-}
+pub use edgepoint_proto::shaders::parse_param;
 
 pub(crate) fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
     LocalCluster::start(LocalOptions {

@@ -39,12 +39,15 @@
 //!   complete samples/s and request-to-sample latency under light and saturated load.
 //! - `speedup`: per scene and shader, an edge-and-point session's median frame time against
 //!   a full 1-spp frame shaded by the same workers (paper 000 Table 2's speedup).
+//! - `exact-area`: the `direct` shader's exact area lights against its sampled ones on one
+//!   thread: samples/s and the sampled images' noise.
 
 mod clock;
 mod converge;
 mod edges;
 mod encode;
 mod epi;
+mod exact_area;
 mod frame;
 mod fuzz;
 mod inprocess;
@@ -125,6 +128,9 @@ enum Cmd {
     /// workers, per scene and shader (paper 000 Table 2).
     #[command(after_help = edgepoint_proto::shaders::help_text())]
     Speedup(speedup::SpeedupArgs),
+    /// The direct shader's exact area lights (area=exact) against its sampled soft shadows:
+    /// samples/s on one thread and the sampled images' noise against the exact one.
+    ExactArea(exact_area::ExactAreaArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -148,6 +154,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Rays(a) => rays::run(a),
         Cmd::Split(a) => split::run(a),
         Cmd::Speedup(a) => speedup::run(a),
+        Cmd::ExactArea(a) => exact_area::run(a),
     }
 }
 

@@ -5,12 +5,7 @@ use edgepoint_proto as pb;
 use edgepoint_worker::RayRequest;
 use std::collections::HashMap;
 
-/// Parses a `--shader-param KEY=VALUE`.
-pub fn parse_param(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not KEY=VALUE"))?;
-    let v: f64 = v.trim().parse().map_err(|_| format!("'{v}' in '{s}' is not a number"))?;
-    Ok((k.trim().to_string(), v))
-}
+pub use edgepoint_proto::shaders::parse_param;
 
 /// Random primary rays through a 512x512 image of the scene camera: the same mix the
 /// renderer requests (sparse pixels all over the image).

@@ -12,7 +12,7 @@ fn bench(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn every_subcommand_has_help() {
-    for sub in ["frame", "throughput", "loadtest", "load", "edges", "reference", "epi", "quality", "motion", "encode", "fuzz"] {
+    for sub in ["frame", "throughput", "loadtest", "load", "edges", "reference", "epi", "quality", "motion", "encode", "fuzz", "exact-area"] {
         let out = bench(&[sub, "--help"]);
         assert!(out.status.success(), "{sub} --help failed");
         assert!(String::from_utf8_lossy(&out.stdout).contains("--json"), "{sub} --help names --json");

@@ -40,12 +40,50 @@ const SHADOW_RAYS: ShaderParam = ShaderParam {
 };
 const AMBIENT: ShaderParam = ShaderParam { name: "ambient", min: 0.0, max: 100.0, default: 1.0, integer: false, help: "scale of the scene's ambient term (built-ins: their own; a bare model staged by the loader: 0.03 grey; a scene file that brings its own lights or camera: none, so 0 whatever the scale)" };
 
+/// How `direct` lights a point from an area light (`area`): 0 `sampled`, `shadow_rays`
+/// stratified rays (noisy soft shadows); 1 `exact`, the visible part of the light clipped
+/// from the blockers in the point–light pyramid and Lambert's formula over it (no noise).
+const AREA: ShaderParam = ShaderParam {
+    name: "area",
+    min: 0.0,
+    max: 1.0,
+    default: 0.0,
+    integer: true,
+    help: "area lights: 0 or `sampled` = shadow_rays stratified rays; 1 or `exact` = the exact visible part of the light (blockers clipped in the point-light pyramid) and Lambert's closed form: soft shadows without noise, cost grows with the blockers in the pyramid",
+};
+
+/// Parameters whose values have names too (`--shader-param area=exact`): the name stands
+/// for its number, which is what travels in `start`.
+pub const VALUE_NAMES: &[(&str, &[(&str, f64)])] = &[("area", &[("sampled", 0.0), ("exact", 1.0)])];
+
+/// Parses a `--shader-param KEY=VALUE`: VALUE a finite number or one of the key's names
+/// ([`VALUE_NAMES`]). The range is checked later, against the shader ([`resolve`]).
+pub fn parse_param(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("expected KEY=VALUE, got '{s}'"))?;
+    let (k, v) = (k.trim(), v.trim());
+    if k.is_empty() {
+        return Err(format!("empty parameter name in '{s}'"));
+    }
+    let names = VALUE_NAMES.iter().find(|(key, _)| *key == k).map_or(&[][..], |(_, n)| *n);
+    if let Some((_, x)) = names.iter().find(|(name, _)| *name == v) {
+        return Ok((k.to_string(), *x));
+    }
+    let x: f64 = v.parse().map_err(|_| {
+        let named = names.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        format!("value of '{k}' must be a number{}, got '{v}'", if named.is_empty() { String::new() } else { format!(" or one of {named}") })
+    })?;
+    if !x.is_finite() {
+        return Err(format!("value of '{k}' must be finite, got {x}"));
+    }
+    Ok((k.to_string(), x))
+}
+
 /// Every shader.
 pub const SHADERS: &[ShaderInfo] = &[
     ShaderInfo {
         name: "direct",
-        help: "point and polygonal area lights with shadow rays, Lambertian, ambient (paper 000)",
-        params: &[SHADOW_RAYS, AMBIENT],
+        help: "point and polygonal area lights with shadow rays (or exact area-light visibility), Lambertian, ambient (paper 000)",
+        params: &[SHADOW_RAYS, AMBIENT, AREA],
     },
     ShaderInfo {
         name: "glossy",
@@ -173,7 +211,27 @@ mod tests {
                 assert!(p.min <= p.default && p.default <= p.max && (!p.integer || p.default.fract() == 0.0), "{}", p.name);
             }
         }
+        let a = resolve("direct", &given(&[("area", 1.0)])).unwrap();
+        assert_eq!((a["area"], d["area"]), (1.0, 0.0));
+        for bad in [("area", 2.0), ("area", 0.5)] {
+            assert!(resolve("direct", &given(&[bad])).unwrap_err().contains("area"));
+        }
+        assert!(resolve("glossy", &given(&[("area", 1.0)])).unwrap_err().contains("no parameter 'area'"));
         let h = help_text();
         assert!(h.contains("direct:") && h.contains("shadow_rays (whole number 1..=4096, default 16)"), "{h}");
+    }
+
+    #[test]
+    fn command_line_values_are_numbers_or_the_keys_names() {
+        assert_eq!(parse_param("area=exact").unwrap(), ("area".to_string(), 1.0));
+        assert_eq!(parse_param(" area = sampled ").unwrap(), ("area".to_string(), 0.0));
+        assert_eq!(parse_param("shadow_rays=16").unwrap(), ("shadow_rays".to_string(), 16.0));
+        let e = parse_param("area=best").unwrap_err();
+        assert!(e.contains("'area'") && e.contains("sampled, exact") && e.contains("'best'"), "{e}");
+        let e = parse_param("shadow_rays=exact").unwrap_err();
+        assert!(e.contains("must be a number, got 'exact'"), "{e}");
+        assert!(parse_param("shadow_rays").unwrap_err().contains("KEY=VALUE"));
+        assert!(parse_param("=3").unwrap_err().contains("empty parameter name"));
+        assert!(parse_param("ambient=inf").unwrap_err().contains("finite"));
     }
 }

@@ -14,6 +14,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod alloc_count;
+pub mod backprojection;
 pub mod builtin;
 pub mod camera;
 pub mod data;
@@ -26,6 +27,8 @@ pub mod load;
 pub mod material;
 pub mod mesh;
 pub mod orbit;
+pub mod polyclip;
+pub mod polygon_irradiance;
 pub mod progress;
 mod scene;
 

@@ -210,6 +210,56 @@ impl SceneBvh {
     }
 }
 
+/// A pyramid (an apex and a convex planar base) as a convex region tested against boxes:
+/// the point–light pyramid whose triangles can hide part of an area light from the apex
+/// (the `direct` shader's `area=exact`). The test is conservative (a box is rejected only
+/// when it lies outside the pyramid's bounding box or wholly outside one face plane, with a
+/// little slack), so nothing that could block is missed; the exact clip comes after.
+pub struct Pyramid {
+    /// Face planes as (normal, offset): inside where `normal · x >= offset`.
+    planes: Vec<(Vec3A, f32)>,
+    lo: Vec3A,
+    hi: Vec3A,
+}
+
+impl Pyramid {
+    pub fn new(apex: Vec3, base: &[Vec3]) -> Pyramid {
+        let pts: Vec<Vec3A> = std::iter::once(apex).chain(base.iter().copied()).map(Vec3A::from).collect();
+        let (lo, hi) = pts.iter().fold((Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let slack = (hi - lo).max_element() * 1e-4;
+        let centre = pts.iter().copied().sum::<Vec3A>() / pts.len() as f32;
+        let k = base.len();
+        let a = Vec3A::from(apex);
+        let mut faces: Vec<[Vec3A; 3]> = (0..k).map(|i| [a, pts[1 + i], pts[1 + (i + 1) % k]]).collect();
+        if k >= 3 {
+            faces.push([pts[1], pts[2], pts[3]]);
+        }
+        let planes = faces
+            .iter()
+            .filter_map(|[p, q, r]| {
+                // A face too thin to orient (the apex on the base plane, a repeated corner)
+                // is left out: the test only gets more conservative.
+                let n = (*q - *p).cross(*r - *p).try_normalize()?;
+                let n = if n.dot(centre - *p) >= 0.0 { n } else { -n };
+                Some((n, n.dot(*p) - slack))
+            })
+            .collect();
+        Pyramid { planes, lo: lo - slack, hi: hi + slack }
+    }
+
+    /// The same pyramid in another space (`t` affine: an object's world-to-object map).
+    pub fn transformed(apex: Vec3, base: &[Vec3], t: &Affine3A) -> Pyramid {
+        let base: Vec<Vec3> = base.iter().map(|p| t.transform_point3(*p)).collect();
+        Pyramid::new(t.transform_point3(apex), &base)
+    }
+
+    /// Whether box [`lo`, `hi`] may meet the pyramid.
+    #[inline]
+    pub fn may_overlap(&self, lo: Vec3A, hi: Vec3A) -> bool {
+        lo.cmple(self.hi).all() && self.lo.cmple(hi).all() && self.planes.iter().all(|(n, d)| n.dot(Vec3A::select(n.cmpge(Vec3A::ZERO), hi, lo)) >= *d)
+    }
+}
+
 /// The top level for one set of object transforms (one epoch).
 pub struct Instances {
     top: Bvh8,
@@ -378,6 +428,32 @@ impl Instances {
     #[inline]
     pub fn normal_to_world(&self, object: u32) -> Mat3A {
         self.normal_to_world[object as usize]
+    }
+
+    /// Calls `f(object, triangle index in its mesh)` for every triangle whose leaf box may
+    /// meet the pyramid from `apex` to the convex planar `base` (world space): a superset of
+    /// the triangles inside it, each once.
+    pub fn triangles_near_pyramid(&self, bvh: &SceneBvh, apex: Vec3, base: &[Vec3], mut f: impl FnMut(u32, u32)) {
+        let world = Pyramid::new(apex, base);
+        self.top.visit_overlapping(
+            |lo, hi| world.may_overlap(lo, hi),
+            |leaf| {
+                let l = &self.top_leaves[leaf as usize];
+                for s in l.first..l.first + l.count {
+                    let obj = self.slot_object[s as usize];
+                    let o = &bvh.objects[obj as usize];
+                    let local = Pyramid::transformed(apex, base, &self.to_object[obj as usize]);
+                    o.bvh.visit_overlapping(
+                        |lo, hi| local.may_overlap(lo, hi),
+                        |b| {
+                            for &t in o.blocks[b as usize].tri.iter().filter(|t| **t != u32::MAX) {
+                                f(obj, t);
+                            }
+                        },
+                    );
+                }
+            },
+        );
     }
 
     /// Any hit with `tmin <= t <= tmax`: the id of an object blocking the segment. Stops

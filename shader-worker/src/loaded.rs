@@ -3,6 +3,7 @@
 use crate::bvh::{Instances, SceneBvh};
 use crate::shader::irradiance_cache::IrradianceCache;
 use crate::shader::vpl::VplCache;
+use edgepoint_scene::backprojection::LightPlane;
 use edgepoint_scene::{Light, Progress, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::Arc;
@@ -19,6 +20,9 @@ pub struct AreaLight {
     pub normal: Vec3,
     pub centroid: Vec3,
     pub radiance: Vec3,
+    /// The light's plane and corners in f64 for exact visibility (`direct` `area=exact`);
+    /// `None` only for a degenerate polygon, which validation refuses.
+    pub plane: Option<LightPlane>,
 }
 
 impl AreaLight {
@@ -71,6 +75,7 @@ impl PreparedLight {
                     normal: l.normal().unwrap_or(Vec3::Y),
                     centroid: l.center(),
                     radiance: *radiance,
+                    plane: LightPlane::new(vertices),
                 })
             }
         }

@@ -53,18 +53,12 @@ pub fn scene(objects: Vec<Object>, lights: Vec<Light>, ambient: f32) -> Scene {
     }
 }
 
-/// Irradiance at `p` (normal `n`) from a uniform polygon of radiance 1: Lambert's formula,
-/// the exact polygon-to-point form factor times π: E = ½ Σ_edges β_i · n · unit(v_i × v_{i+1}),
-/// with v_i the unit vectors to the corners and β_i the angle between consecutive ones.
+/// Irradiance at `p` (normal `n`) from a uniform polygon of radiance 1 wholly above the
+/// point's tangent plane, either winding: Lambert's formula (`edgepoint_scene::polygon_irradiance`,
+/// the exact polygon-to-point form factor times π).
 pub fn polygon_irradiance(p: Vec3, n: Vec3, poly: &[Vec3]) -> f32 {
-    let mut e = 0.0;
-    for i in 0..poly.len() {
-        let a = (poly[i] - p).normalize();
-        let b = (poly[(i + 1) % poly.len()] - p).normalize();
-        let beta = a.dot(b).clamp(-1.0, 1.0).acos();
-        e += 0.5 * beta * n.dot(a.cross(b).normalize());
-    }
-    e.abs()
+    let poly: Vec<_> = poly.iter().map(|v| v.as_dvec3()).collect();
+    edgepoint_scene::polygon_irradiance::polygon_irradiance(p.as_dvec3(), n.as_dvec3(), &poly).abs() as f32
 }
 
 /// A shader's spec from its name and parameters (the others at their defaults).

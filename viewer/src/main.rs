@@ -127,9 +127,9 @@ struct Args {
     #[arg(long, value_name = "NAME", default_value = "direct")]
     shader: String,
 
-    /// A numeric shader parameter, KEY=VALUE (e.g. shadow_rays=16; listed below); repeat for
-    /// several. The server refuses unknown ones and values out of range.
-    #[arg(long, value_name = "KEY=VALUE", value_parser = parse_shader_param)]
+    /// A shader parameter, KEY=VALUE (e.g. shadow_rays=16 or area=exact; listed below); repeat
+    /// for several. The server refuses unknown ones and values out of range.
+    #[arg(long, value_name = "KEY=VALUE", value_parser = edgepoint_proto::shaders::parse_param)]
     shader_param: Vec<(String, f64)>,
 
     /// How one pixel's shading is spread over the workers (paper 004 §4.4): `pixels`
@@ -286,18 +286,6 @@ impl From<Encoding> for FrameEncoding {
     }
 }
 
-fn parse_shader_param(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("expected KEY=VALUE, got '{s}'"))?;
-    let k = k.trim();
-    if k.is_empty() {
-        return Err(format!("empty parameter name in '{s}'"));
-    }
-    let v: f64 = v.trim().parse().map_err(|_| format!("value of '{k}' must be a number, got '{}'", v.trim()))?;
-    if !v.is_finite() {
-        return Err(format!("value of '{k}' must be finite, got {v}"));
-    }
-    Ok((k.to_string(), v))
-}
 
 fn parse_exposure(s: &str) -> Result<f32, String> {
     let v: f32 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;

@@ -220,6 +220,36 @@ impl Bvh8 {
         }
     }
 
+    /// Visits every leaf whose box, and every ancestor's box, `overlaps(lo, hi)` accepts (a
+    /// region query: the gatherer of blockers for exact area lights passes a convex volume's
+    /// conservative box test).
+    pub fn visit_overlapping(&self, overlaps: impl Fn(Vec3A, Vec3A) -> bool, mut leaf: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = Vec::with_capacity(7 * self.depth + 1);
+        stack.push(0u32);
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            for i in 0..8 {
+                let c = node.child[i];
+                if c == EMPTY {
+                    continue;
+                }
+                let p = &node.planes;
+                let (lo, hi) = (Vec3A::new(p[0][i], p[2][i], p[4][i]), Vec3A::new(p[1][i], p[3][i], p[5][i]));
+                if !overlaps(lo, hi) {
+                    continue;
+                }
+                if c & LEAF != 0 {
+                    leaf(c & !LEAF);
+                } else {
+                    stack.push(c);
+                }
+            }
+        }
+    }
+
     /// [`Self::traverse_with`] with `stack` holding at least `7 * depth + 1` entries.
     #[inline(always)]
     unsafe fn traverse_on<N: NodeTest, const ORDERED: bool>(&self, stack: &mut [MaybeUninit<(u32, f32)>], ray: &PreparedRay, tmax: &mut f32, leaf: &mut impl Leaf) {
@@ -366,6 +396,43 @@ mod tests {
                 false
             });
             assert_eq!(visited, 0);
+        }
+    }
+
+    /// The region query against brute force: random boxes and query boxes, the leaves
+    /// visited hold exactly the primitives whose boxes overlap the query (a leaf may hold
+    /// others beside them).
+    #[test]
+    fn region_query_finds_every_overlapping_box() {
+        let mut z = 12345u64;
+        let mut next = || {
+            z = z.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (z >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let boxes: Vec<Aabb> = (0..500)
+            .map(|_| {
+                let c = Vec3A::new(next(), next(), next()) * 10.0;
+                Aabb::new(c, c + Vec3A::new(next(), next(), next()))
+            })
+            .collect();
+        let b = Bvh8::from_bvh2(&build_bvh2(&boxes));
+        for _ in 0..50 {
+            let qlo = Vec3A::new(next(), next(), next()) * 10.0;
+            let qhi = qlo + Vec3A::splat(1.0 + 3.0 * next());
+            let overlap = |lo: Vec3A, hi: Vec3A| lo.cmple(qhi).all() && qlo.cmple(hi).all();
+            let mut found = vec![false; boxes.len()];
+            b.bvh.visit_overlapping(overlap, |leaf| {
+                let l = &b.leaves[leaf as usize];
+                for &p in &b.prims[l.first as usize..(l.first + l.count) as usize] {
+                    found[p as usize] = true;
+                }
+            });
+            for (i, bx) in boxes.iter().enumerate() {
+                if overlap(bx.min, bx.max) {
+                    assert!(found[i], "box {i} overlaps the query but was not visited");
+                }
+            }
+            assert!(found.iter().filter(|f| **f).count() < boxes.len(), "the query prunes");
         }
     }
 }

@@ -1,5 +1,6 @@
 //! `direct` (paper 000 §7: "direct illumination with ambient"): point lights with one
-//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows), the
+//! shadow ray, planar polygonal area lights with N stratified shadow rays (soft shadows) or,
+//! with `area=exact`, on Lambertian surfaces by their exact visible part ([`super::exact_area`]), the
 //! material's BSDF ([`crate::surface`]: shading normals, textures, sidedness), emission of
 //! light fixtures seen from the front, and an ambient term times the diffuse albedo. Rough
 //! lobes also sample the BSDF toward area lights (multiple importance sampling) and delta
@@ -25,6 +26,9 @@ pub struct DirectParams {
     pub shadow_rays: u32,
     /// Scale of the scene's ambient term (`ambient`).
     pub ambient: f32,
+    /// Area lights on Lambertian surfaces by their exact visible part and Lambert's formula
+    /// (`area=exact`, [`super::exact_area`]) instead of `shadow_rays` rays.
+    pub exact_area: bool,
 }
 
 impl Default for DirectParams {
@@ -58,7 +62,7 @@ pub(crate) fn shade(scene: &LoadedScene, inst: &Instances, p: &DirectParams, see
 /// the ambient term in part 0). `glossy` adds the same at every bounce.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn add_lit(scene: &LoadedScene, inst: &Instances, s: &Surface, p: &DirectParams, part: Part, rng: &mut Rng, bsdf_rng: &mut Rng, triples: Option<&mut Vec<[u32; 3]>>, rgb: &mut Vec3) {
-    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: p.shadow_rays, bsdf_per_light_sample: 1.0, part };
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: p.shadow_rays, bsdf_per_light_sample: 1.0, exact: p.exact_area, part };
     add_direct_light(scene, inst, &q, rng, triples, rgb);
     if s.sp.scatters {
         if s.sp.bsdf_has_delta() || s.sp.is_glossy() {

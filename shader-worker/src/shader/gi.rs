@@ -89,7 +89,7 @@ fn scattered<'a>(ctx: &Ctx<'a>, mut s: Surface<'a>, mut depth: u32, part: Part, 
         let k = if depth == 0 { p.shadow_rays } else { 1 };
         let mut direct = Vec3::ZERO;
         let vertex_part = if depth == 0 { part } else { Part::WHOLE };
-        let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k, bsdf_per_light_sample: 1.0 / k as f32, part: vertex_part };
+        let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k, bsdf_per_light_sample: 1.0 / k as f32, exact: false, part: vertex_part };
         add_direct_light(scene, inst, &q, light_rng, triples.take(), &mut direct);
         l += beta * direct;
         if !s.sp.scatters || !vertex_part.shades_unsplit_terms() {

@@ -138,7 +138,7 @@ fn radiance(ctx: &Ctx, s: &Surface, depth: u32, beta: Vec3, vertex: &mut u64, mu
     let mut l = Vec3::ZERO;
     // Lights, one at a time (each with its own stream).
     let lights = ctx.part.lights;
-    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0, part: edgepoint_proto::split::Part::WHOLE };
+    let q = LightQuery { sp: &s.sp, receiver: s.h.object, origin: s.origin, n: s.n, k: ctx.p.shadow_rays, bsdf_per_light_sample: 1.0, exact: false, part: edgepoint_proto::split::Part::WHOLE };
     for li in (0..scene.lights.len()).filter(|&li| lights.owns(li)) {
         add_direct_light_in(scene, inst, &q, li..li + 1, &mut light_rng(ctx, v, li), triples.as_deref_mut(), &mut l);
     }

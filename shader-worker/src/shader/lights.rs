@@ -30,6 +30,9 @@ pub(crate) struct LightQuery<'a> {
     /// BSDF samples the caller draws toward the lights per light sample: 1 when it draws
     /// as many as `k` (the `direct` shader), 1/k for a path's single next ray.
     pub bsdf_per_light_sample: f32,
+    /// Area lights on Lambertian surfaces exactly ([`super::exact_area`]) instead of by `k`
+    /// rays (`direct` `area=exact`); other lobes still sample them.
+    pub exact: bool,
     /// Which lights to sample (split shading): the others are passed over, their random
     /// numbers skipped, so every part draws what the whole shading would have drawn.
     pub part: Part,
@@ -89,9 +92,21 @@ pub(crate) fn add_direct_light_in(scene: &LoadedScene, inst: &Instances, q: &Lig
                     continue;
                 }
                 let k = q.k;
+                // Exact visibility needs a BSDF constant over the hemisphere (irradiance
+                // times albedo/π); it draws no random numbers.
+                let exact = q.exact && sp.constant.is_some();
                 if !owned {
                     // Another part samples this light: one rotation and two numbers a ray.
-                    rng.skip(1 + 2 * k as u64);
+                    if !exact {
+                        rng.skip(1 + 2 * k as u64);
+                    }
+                    continue;
+                }
+                if exact {
+                    let e = super::exact_area::irradiance(scene, inst, a, origin, n, |b| blocked(b, li));
+                    if let (true, Some(f)) = (lit, sp.constant) {
+                        *rgb += f * a.radiance * e;
+                    }
                     continue;
                 }
                 let nx = (k as f32).sqrt().ceil() as u32;

@@ -21,6 +21,7 @@
 //! numbers of what it does not shade ([`shade_batch_parts`]).
 pub mod direct;
 pub mod elements;
+mod exact_area;
 pub mod gi;
 pub mod glossy;
 pub mod hybrid;
@@ -61,7 +62,8 @@ impl ShaderSpec {
     pub fn parse(name: &str, params: &HashMap<String, f64>) -> Result<ShaderSpec, String> {
         let p = edgepoint_proto::shaders::resolve(name, params)?;
         let whole = |k: &str| p[k] as u32;
-        let direct = || DirectParams { shadow_rays: whole("shadow_rays"), ambient: p["ambient"] as f32 };
+        // `glossy` shares `direct`'s light sampling but not its `area` parameter.
+        let direct = || DirectParams { shadow_rays: whole("shadow_rays"), ambient: p["ambient"] as f32, exact_area: p.get("area") == Some(&1.0) };
         match edgepoint_proto::shaders::shader(name).map(|s| s.name) {
             Some("direct") => Ok(ShaderSpec::Direct(direct())),
             Some("glossy") => Ok(ShaderSpec::Glossy(GlossyParams { direct: direct(), rays: whole("rays"), max_depth: whole("max_depth") })),
