@@ -9,22 +9,12 @@
 //! Needs Chromium (Debian package `chromium`; `.ci/run` installs it). Without it the test says
 //! why and passes, unless `EDGEPOINT_REQUIRE_CHROMIUM=1` (set by `.ci/run`).
 use edgepoint_tests::cdp::{find_chromium, Browser};
+use edgepoint_tests::wait_for;
 use serde_json::Value;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const SIZE: u32 = 256;
 const TOKEN: &str = "browser-test-token-0123456789";
-
-fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
-    let end = Instant::now() + limit;
-    while Instant::now() < end {
-        if cond() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    cond()
-}
 
 /// The page's state (window.edgepoint) as JSON.
 fn page(b: &mut Browser) -> Value {

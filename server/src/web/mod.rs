@@ -197,6 +197,80 @@ fn upgrade(mut req: Request<hyper::body::Incoming>, peer: SocketAddr, service: A
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::service::ServiceConfig;
+    use crate::workers::WorkerPool;
+    use futures_util::{SinkExt, StreamExt};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    use tokio_tungstenite::tungstenite::Message;
+
+    const GOOD: &str = "good-token-0123456789";
+
+    /// A listener on a service with a viewer token and no workers (a session that passes
+    /// the token check is then refused for want of workers).
+    async fn listener() -> SocketAddr {
+        let pool = Arc::new(WorkerPool::new(vec![]).unwrap());
+        let svc = RendererService::new(pool, ServiceConfig { tokens: Some(Arc::new(vec![GOOD.into()])), ..Default::default() });
+        let l = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = l.local_addr().unwrap();
+        tokio::spawn(serve(l, Arc::new(svc), WebOptions::default()));
+        addr
+    }
+
+    /// The page's first message with `token`, answered by the server's first text message.
+    async fn hello(addr: SocketAddr, first: Message) -> (serde_json::Value, Option<String>) {
+        let (mut ws, _) = tokio_tungstenite::client_async(format!("ws://{addr}/live"), tokio::net::TcpStream::connect(addr).await.unwrap()).await.unwrap();
+        ws.send(first).await.unwrap();
+        let mut answer = serde_json::Value::Null;
+        let mut close = None;
+        while let Some(Ok(m)) = ws.next().await {
+            match m {
+                Message::Text(t) => answer = serde_json::from_str(&t).unwrap(),
+                Message::Close(c) => close = c.map(|c| c.reason.to_string()),
+                _ => {}
+            }
+        }
+        (answer, close)
+    }
+
+    fn hello_with(token: &str) -> Message {
+        Message::text(serde_json::json!({"type": "hello", "token": token, "start": {"scene": "cornell", "width": 64, "height": 64}}).to_string())
+    }
+
+    async fn raw_get(addr: SocketAddr, extra: &str) -> String {
+        let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+        s.write_all(format!("GET /live HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n{extra}\r\n").as_bytes()).await.unwrap();
+        let mut buf = vec![0u8; 512];
+        let n = tokio::time::timeout(Duration::from_secs(10), s.read(&mut buf)).await.unwrap().unwrap();
+        String::from_utf8_lossy(&buf[..n]).into_owned()
+    }
+
+    #[tokio::test]
+    async fn the_live_connection_refuses_wrong_tokens_big_messages_and_other_origins() {
+        let addr = listener().await;
+        let (a, close) = hello(addr, hello_with("wrong-token-0123456789")).await;
+        assert_eq!((a["type"].as_str(), a["code"].as_str()), (Some("refused"), Some("UNAUTHENTICATED")), "{a}");
+        assert!(a["message"].as_str().unwrap().contains("#token="), "{a}");
+        assert!(close.unwrap().starts_with("UNAUTHENTICATED"));
+        let (a, _) = hello(addr, Message::text(serde_json::json!({"type": "hello", "start": {"scene": "cornell", "width": 64, "height": 64}}).to_string())).await;
+        assert_eq!(a["code"], "UNAUTHENTICATED", "no token: {a}");
+        // The right token passes; this service then has no workers to offer.
+        let (a, _) = hello(addr, hello_with(GOOD)).await;
+        assert_eq!(a["code"], "FAILED_PRECONDITION", "{a}");
+        assert!(a["message"].as_str().unwrap().contains("no shader workers"), "{a}");
+        // A bad first message and one above the limit are refused, saying why.
+        let (a, _) = hello(addr, Message::text(r#"{"type":"hello","start":{"scene":"cornell","width":0,"height":8}}"#)).await;
+        assert_eq!((a["code"].as_str(), a["message"].as_str().map(|m| m.contains("start.width"))), (Some("INVALID_ARGUMENT"), Some(true)), "{a}");
+        let (a, close) = hello(addr, Message::text("x".repeat(MAX_PAGE_MESSAGE + 1))).await;
+        assert_eq!(a["code"], "OUT_OF_RANGE", "{a}");
+        assert!(a["message"].as_str().unwrap().contains(&MAX_PAGE_MESSAGE.to_string()), "{a}");
+        assert!(close.is_some());
+        // The handshake: a page of this origin is let in, another origin is not.
+        let ok = raw_get(addr, &format!("Origin: http://{addr}\r\n")).await;
+        assert!(ok.starts_with("HTTP/1.1 101"), "{ok}");
+        assert!(ok.contains("s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), "the RFC 6455 example key's answer: {ok}");
+        let other = raw_get(addr, "Origin: http://evil.example\r\n").await;
+        assert!(other.starts_with("HTTP/1.1 403"), "{other}");
+    }
 
     #[test]
     fn the_page_offers_scenes_without_data_files_and_every_shader() {
