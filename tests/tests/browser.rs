@@ -122,16 +122,17 @@ fn the_page_shows_frames_follows_the_mouse_and_reports_refusals_and_lost_connect
     assert!(wait_for(Duration::from_secs(20), || page(&mut b)["header"]["reconstruction"] == "render-cache"), "the reconstruction switch reached no frame");
 
     // Figures at 512² over loopback: bytes per frame and end-to-end latency, at rest and
-    // while the camera orbits (a steady turn each display frame, as a held drag gives).
+    // while the camera orbits (a turn each display frame, as a held drag gives, swinging
+    // between the scene camera and 0.15 rad beside it so the eye stays inside the box).
     b.navigate(&format!("{base}?scene=cornell&shader=direct&size=512&m=1#token={TOKEN}")).unwrap();
     assert!(wait_for(Duration::from_secs(90), || page(&mut b)["frames"].as_u64() >= Some(5)), "no 512² frames: {}", page(&mut b));
     let secs: f64 = std::env::var("EDGEPOINT_BROWSER_MEASURE_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(8.0);
     let mut figures = serde_json::Map::new();
-    for (phase, setup) in [("rest", ""), ("orbit", "window.__spin = setInterval(() => edgepoint.orbitBy(0.01, 0), 16);")] {
+    for (phase, setup) in [("rest", ""), ("orbit", "let k = 0; window.__spin = setInterval(() => edgepoint.orbitBy(((k++ / 15) | 0) % 2 ? -0.01 : 0.01, 0), 16);")] {
         b.eval(&format!("{setup} edgepoint.bytes = []; edgepoint.lat = []; edgepoint.f0 = edgepoint.frames; edgepoint.t0 = performance.now(); \
             window.__lat = setInterval(() => {{ if (edgepoint.latency != null) edgepoint.lat.push(edgepoint.latency); }}, 50); \
             edgepoint.flog = []; window.__flog = setInterval(() => {{ const h = edgepoint.header; if (h && h.seq !== window.__fseq) {{ window.__fseq = h.seq; \
-            edgepoint.flog.push([h.seq, h.tiles.length, h.camera.eye[0], h.total_ms]); }} }}, 5); 0")).unwrap();
+            edgepoint.flog.push([h.seq, h.tiles.length, h.camera.eye[0], h.total_ms, h.samples_used, h.frames_dropped]); }} }}, 5); 0")).unwrap();
         std::thread::sleep(Duration::from_secs_f64(secs));
         let v = b.eval("(() => { clearInterval(window.__lat); clearInterval(window.__spin); clearInterval(window.__flog); const s = (a) => a.slice().sort((x, y) => x - y); \
             const q = (a, f) => a.length ? s(a)[Math.min(a.length - 1, Math.floor(f * a.length))] : null; \
@@ -140,6 +141,9 @@ fn the_page_shows_frames_follows_the_mouse_and_reports_refusals_and_lost_connect
             latency_median_ms: q(edgepoint.lat, 0.5), latency_p95_ms: q(edgepoint.lat, 0.95), \
             tiles_changed_mean: edgepoint.flog.reduce((a, f) => a + f[1], 0) / Math.max(1, edgepoint.flog.length), tiles_per_frame: Math.ceil(512 / 32) ** 2, \
             frame_loop_ms_median: q(edgepoint.flog.map((f) => f[3]), 0.5)}; })()").unwrap();
+        if std::env::var_os("EDGEPOINT_BROWSER_FRAME_LOG").is_some() {
+            eprintln!("{phase} [seq, tiles, eye.x, ms]: {}", b.eval("JSON.stringify(edgepoint.flog.slice(0, 60))").unwrap());
+        }
         figures.insert(phase.into(), v);
     }
     figures.insert("raw_rgb_frame_bytes".into(), (512u64 * 512 * 3).into());

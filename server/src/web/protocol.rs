@@ -15,6 +15,9 @@ use serde_json::{json, Value};
 pub const MAX_PAGE_SIDE: u32 = 4096;
 
 /// What a page's text message asks for.
+// One lives at a time, moved straight into the session's input channel: boxing the large
+// variant would only add an allocation per message.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum PageMsg {
     /// For the session: camera, pick, move or settings.
