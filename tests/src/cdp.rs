@@ -15,13 +15,20 @@ pub const CHROMIUM: &str = "/usr/bin/chromium";
 
 /// The browser (killed by its pid and its profile removed on drop) and one page of it.
 pub struct Browser {
-    child: Child,
-    profile: PathBuf,
     ws: WebSocket<TcpStream>,
     next_id: u64,
+    // Dropped last: the page's socket closes before the browser goes.
+    _process: Process,
 }
 
-impl Drop for Browser {
+/// The Chromium process and its profile directory, from the moment it is spawned, so a
+/// start that fails half-way leaves nothing running.
+struct Process {
+    child: Child,
+    profile: PathBuf,
+}
+
+impl Drop for Process {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
@@ -76,6 +83,7 @@ impl Browser {
             .stderr(Stdio::null())
             .spawn()
             .with_context(|| format!("starting {}", exe.display()))?;
+        let process = Process { child, profile: profile.clone() };
         // Chromium writes the port it bound into the profile's DevToolsActivePort.
         let port_file = profile.join("DevToolsActivePort");
         let deadline = Instant::now() + Duration::from_secs(30);
@@ -102,7 +110,7 @@ impl Browser {
         let stream = TcpStream::connect(("127.0.0.1", port))?;
         stream.set_read_timeout(Some(Duration::from_secs(60)))?;
         let (ws, _) = tungstenite::client(page_ws.as_str(), stream).context("DevTools WebSocket handshake")?;
-        let mut b = Browser { child, profile, ws, next_id: 1 };
+        let mut b = Browser { ws, next_id: 1, _process: process };
         b.call("Page.enable", json!({}))?;
         b.call("Runtime.enable", json!({}))?;
         Ok(b)
