@@ -213,6 +213,14 @@ fn read(path: &Path, what: &str) -> Result<Vec<u8>, String> {
 /// chain's first certificate, so a mismatch is named at start-up rather than failing every
 /// handshake later with an opaque "transport error".
 fn checked_identity(cert: &Path, key: &Path) -> Result<Identity, String> {
+    let (c, k, _, _) = checked_pem(cert, key)?;
+    Ok(Identity::from_pem(c, k))
+}
+
+/// A certificate chain, its private key (checked to match) and their PEM bytes.
+type CheckedPem = (Vec<u8>, Vec<u8>, Vec<rustls::pki_types::CertificateDer<'static>>, rustls::pki_types::PrivateKeyDer<'static>);
+
+fn checked_pem(cert: &Path, key: &Path) -> Result<CheckedPem, String> {
     use rustls::pki_types::pem::PemObject;
     use rustls::pki_types::{CertificateDer, PrivateKeyDer};
     let c = read(cert, "TLS certificate")?;
@@ -225,8 +233,8 @@ fn checked_identity(cert: &Path, key: &Path) -> Result<Identity, String> {
     }
     let der = PrivateKeyDer::from_pem_slice(&k).map_err(|e| format!("{}: no PEM private key: {e}", key.display()))?;
     let provider = rustls::crypto::ring::default_provider();
-    let signing = provider.key_provider.load_private_key(der).map_err(|e| format!("{}: unusable private key: {e}", key.display()))?;
-    let certified = rustls::sign::CertifiedKey::new(chain, signing);
+    let signing = provider.key_provider.load_private_key(der.clone_key()).map_err(|e| format!("{}: unusable private key: {e}", key.display()))?;
+    let certified = rustls::sign::CertifiedKey::new(chain.clone(), signing);
     match certified.keys_match() {
         Ok(()) | Err(rustls::Error::InconsistentKeys(rustls::InconsistentKeys::Unknown)) => {}
         Err(rustls::Error::InconsistentKeys(rustls::InconsistentKeys::KeyMismatch)) => {
@@ -238,7 +246,21 @@ fn checked_identity(cert: &Path, key: &Path) -> Result<Identity, String> {
         }
         Err(e) => return Err(format!("{}: {e}", cert.display())),
     }
-    Ok(Identity::from_pem(c, k))
+    Ok((c, k, chain, der))
+}
+
+/// A rustls server configuration from the same PEM files and checks as [`server_tls`], for
+/// listeners tonic does not serve (the browser viewer's `--web-listen`). Offers HTTP/1.1.
+pub fn rustls_server_config(cert: &Path, key: &Path) -> Result<std::sync::Arc<rustls::ServerConfig>, String> {
+    let (_, _, chain, der) = checked_pem(cert, key)?;
+    let mut cfg = rustls::ServerConfig::builder_with_provider(std::sync::Arc::new(rustls::crypto::ring::default_provider()))
+        .with_safe_default_protocol_versions()
+        .map_err(|e| format!("TLS configuration: {e}"))?
+        .with_no_client_auth()
+        .with_single_cert(chain, der)
+        .map_err(|e| format!("{}: {e}", cert.display()))?;
+    cfg.alpn_protocols = vec![b"http/1.1".to_vec()];
+    Ok(std::sync::Arc::new(cfg))
 }
 
 /// Server TLS from a PEM certificate chain and its PEM private key (checked to match), with

@@ -123,6 +123,13 @@ pub struct ServerArgs {
     #[arg(long, value_name = "ADDR")]
     pub metrics_listen: Option<String>,
 
+    /// Serve the browser viewer at http://ADDR/ (https:// with --tls-cert): a page with a
+    /// live WebSocket connection that drives sessions like a gRPC viewer, under the same
+    /// rules (loopback unless TLS and --token-file, or --insecure; the same limits). Port 0
+    /// picks one; the page's URL is printed on stdout as `web <url>` before `listening`.
+    #[arg(long, value_name = "ADDR")]
+    pub web_listen: Option<String>,
+
     /// Allow --metrics-listen on a non-loopback address (the endpoint is plain HTTP without
     /// authentication and names the workers' addresses).
     #[arg(long, requires = "metrics_listen")]

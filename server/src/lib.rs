@@ -21,6 +21,7 @@
 //! - [`srgb`] — exactly rounded linear to 8-bit sRGB by table.
 //! - [`reference`] — reference renders (1 spp and converged) through the workers.
 //! - [`service`] — the `Renderer` gRPC service.
+//! - [`web`] — the browser viewer: its page and WebSocket live connection (`--web-listen`).
 
 pub mod cli;
 pub mod background;
@@ -39,4 +40,5 @@ pub mod service;
 pub mod session;
 pub mod stage_times;
 pub mod visibility;
+pub mod web;
 pub mod workers;

@@ -1,7 +1,8 @@
 //! `edgepoint-server`: the renderer process. Serves the `Renderer` gRPC service (one render
 //! session per viewer) and grpc.health.v1, dispatching shading work to the shader workers
-//! it is given or discovers (see `edgepoint_server::cli`). Prints `metrics <addr>` (with
-//! `--metrics-listen`) and then `listening <addr>` on stdout once bound.
+//! it is given or discovers (see `edgepoint_server::cli`), and with `--web-listen` the
+//! browser viewer (`edgepoint_server::web`). Prints `metrics <addr>` (with `--metrics-listen`),
+//! `web <url>` (with `--web-listen`) and then `listening <addr>` on stdout once bound.
 use clap::Parser;
 use edgepoint_proto::net::{check_exposure, client_tls, server_tls, Protection};
 use edgepoint_proto::renderer_server::RendererServer;
@@ -47,6 +48,10 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
     };
     let tls = match (&cli.tls_cert, &cli.tls_key) {
         (Some(c), Some(k)) => Some(server_tls(c, k).map_err(anyhow::Error::msg)?),
+        _ => None,
+    };
+    let web_tls = match (&cli.web_listen, &cli.tls_cert, &cli.tls_key) {
+        (Some(_), Some(c), Some(k)) => Some(edgepoint_proto::net::rustls_server_config(c, k).map_err(anyhow::Error::msg)?),
         _ => None,
     };
     let mut worker_tls = if cli.worker_tls_ca.is_some() || cli.worker_tls_domain.is_some() || cli.worker_tls_cert.is_some() {
@@ -119,7 +124,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
         None => edgepoint_server::session::memory::default_budget_bytes(),
     };
     tracing::info!(max_memory_mib = memory_limit >> 20, "session memory budget (--max-memory-mib)");
-    let service = RendererService::new(
+    let service = Arc::new(RendererService::new(
         pool,
         ServiceConfig {
             max_sessions: cli.max_sessions as usize,
@@ -131,8 +136,12 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
             memory: edgepoint_server::session::memory::MemoryBudget::new(memory_limit),
             metrics: metrics.sessions.clone(),
         },
-    );
+    ));
     let shutdown = service.shutdown_handle();
+    if let Some(w) = &cli.web_listen {
+        let opts = edgepoint_server::web::WebOptions { tls: web_tls, insecure: cli.insecure };
+        edgepoint_server::web::start(w, service.clone(), opts).await?;
+    }
 
     let (health_reporter, health_service) = tonic_health::server::health_reporter();
     health_reporter.set_serving::<RendererServer<RendererService>>().await;
@@ -162,7 +171,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
     }
     let server = builder
         .add_service(health_service)
-        .add_service(service.into_server(max_message))
+        .add_service(service.shared_server(max_message))
         .serve_with_incoming_shutdown(edgepoint_proto::net::guarded_incoming(listener), async {
             let _ = stop_rx.await;
         });

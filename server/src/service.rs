@@ -99,7 +99,8 @@ impl Default for ServiceConfig {
     }
 }
 
-/// The renderer service. Clone-free: wrap it with [`RendererService::into_server`].
+/// The renderer service. Clone-free: wrap it with [`RendererService::into_server`] (or share
+/// it in an `Arc` with [`RendererService::shared_server`] and the browser listener).
 pub struct RendererService {
     pool: Arc<WorkerPool>,
     cfg: ServiceConfig,
@@ -158,7 +159,18 @@ impl RendererService {
     /// The tonic server for this service, accepting and sending messages up to
     /// `max_message_bytes` (a `start` may carry a whole scene).
     pub fn into_server(self, max_message_bytes: usize) -> RendererServer<RendererService> {
-        RendererServer::new(self).max_decoding_message_size(max_message_bytes).max_encoding_message_size(max_message_bytes)
+        Arc::new(self).shared_server(max_message_bytes)
+    }
+
+    /// [`Self::into_server`] for a service also shared with the browser listener
+    /// ([`crate::web`]), so both transports draw on the same sessions and limits.
+    pub fn shared_server(self: Arc<Self>, max_message_bytes: usize) -> RendererServer<RendererService> {
+        RendererServer::from_arc(self).max_decoding_message_size(max_message_bytes).max_encoding_message_size(max_message_bytes)
+    }
+
+    /// The service's limits (the browser listener refuses by the same ones).
+    pub fn config(&self) -> &ServiceConfig {
+        &self.cfg
     }
 
     /// Checks the viewer's bearer token when tokens are configured.
@@ -283,7 +295,27 @@ impl Renderer for RendererService {
     type SessionStream = ReceiverStream<Result<pb::ServerMsg, Status>>;
 
     async fn session(&self, request: Request<Streaming<pb::ViewerMsg>>) -> Result<Response<Self::SessionStream>, Status> {
-        let r = self.open_session(request).await;
+        let peer = request.remote_addr();
+        let (md, _, inbound) = request.into_parts();
+        self.serve_session(&md, peer, inbound).await.map(Response::new)
+    }
+}
+
+/// What a session's viewer sends, from any transport: the gRPC request stream, or the
+/// browser's WebSocket messages translated by [`crate::web`].
+pub type ViewerStream = std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::ViewerMsg, Status>> + Send>>;
+
+impl RendererService {
+    /// Opens one session for a viewer whatever its transport (gRPC or the browser's
+    /// WebSocket): the token in `md`, then every check of `start`, the shared session
+    /// machinery, and the refusal metrics. Answers the stream of messages to the viewer.
+    pub async fn serve_session(
+        &self,
+        md: &tonic::metadata::MetadataMap,
+        peer: Option<std::net::SocketAddr>,
+        inbound: impl tokio_stream::Stream<Item = Result<pb::ViewerMsg, Status>> + Send + 'static,
+    ) -> Result<ReceiverStream<Result<pb::ServerMsg, Status>>, Status> {
+        let r = self.open_session(md, peer, Box::pin(inbound)).await;
         match &r {
             Ok(_) => self.cfg.metrics.started.inc(),
             Err(s) => {
@@ -296,17 +328,21 @@ impl Renderer for RendererService {
 }
 
 impl RendererService {
-    async fn open_session(&self, request: Request<Streaming<pb::ViewerMsg>>) -> Result<Response<ReceiverStream<Result<pb::ServerMsg, Status>>>, Status> {
-        let peer = request.remote_addr();
-        self.authenticate(request.metadata())?;
-        let mut inbound = request.into_inner();
+    async fn open_session(
+        &self,
+        md: &tonic::metadata::MetadataMap,
+        peer: Option<std::net::SocketAddr>,
+        mut inbound: ViewerStream,
+    ) -> Result<ReceiverStream<Result<pb::ServerMsg, Status>>, Status> {
+        use tokio_stream::StreamExt;
+        self.authenticate(md)?;
         if self.state.shutting_down.load(Ordering::SeqCst) {
             return Err(Status::unavailable("the renderer is shutting down"));
         }
-        let first = tokio::time::timeout(self.cfg.start_timeout, inbound.message()).await.map_err(|_| {
+        let first = tokio::time::timeout(self.cfg.start_timeout, inbound.next()).await.map_err(|_| {
             Status::deadline_exceeded(format!("no `start` message within {:?} of opening the session", self.cfg.start_timeout))
         })?;
-        let start = match first? {
+        let start = match first.transpose()? {
             Some(pb::ViewerMsg { msg: Some(ViewerIn::Start(s)) }) => s,
             Some(other) => {
                 let what = match other.msg {
@@ -398,7 +434,7 @@ impl RendererService {
                 // Stop reading when the session ends, so the request stream is released
                 // and the connection can drain (graceful shutdown).
                 let msg = tokio::select! {
-                    m = inbound.message() => m,
+                    m = inbound.next() => m.transpose(),
                     _ = out_in.done() => break,
                 };
                 match msg {
@@ -461,7 +497,7 @@ impl RendererService {
             tracing::info!(session = %session.id(), "viewer stream closed");
             drop(session);
         });
-        Ok(Response::new(ReceiverStream::new(rx)))
+        Ok(ReceiverStream::new(rx))
     }
 }
 

@@ -11,6 +11,27 @@ use std::time::{Duration, Instant};
 
 pub use edgepoint_viewer::local::{LocalCluster, LocalOptions};
 
+pub mod cdp;
+
+/// Polls `cond` every 50 ms until it holds or `limit` has passed; whether it held.
+pub fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let end = Instant::now() + limit;
+    while Instant::now() < end {
+        if cond() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    cond()
+}
+
+/// A suffix no other call in this process (nor a recent process) gives: temp names.
+pub fn unique_suffix() -> String {
+    static N: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos()).unwrap_or(0);
+    format!("{nanos:x}-{}", N.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+}
+
 /// Starts a local cluster of `workers` shader workers and one server, with quiet logs.
 pub fn cluster(workers: usize) -> Result<LocalCluster> {
     LocalCluster::start(LocalOptions {

@@ -8,7 +8,8 @@
 //! `.ci/run`), which makes their absence a failure.
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use edgepoint_tests::wait_for;
+use std::time::Duration;
 
 const SIZE: u32 = 256;
 
@@ -45,17 +46,6 @@ fn start_xvfb() -> (Kill, String) {
         }
     }
     panic!("no free X display for Xvfb");
-}
-
-fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
-    let end = Instant::now() + limit;
-    while Instant::now() < end {
-        if cond() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    cond()
 }
 
 fn xdo(display: &str, args: &[&str]) -> String {

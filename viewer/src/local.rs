@@ -61,6 +61,8 @@ pub struct LocalOptions {
     /// (measured on 2 cores, 1024 x 1024: frame loop 108 -> 80 ms per frame, encode stage
     /// 17 -> 7 ms).
     pub worker_nice: i32,
+    /// Give the server `--web-listen ADDR`: the browser viewer (see [`LocalCluster::web_url`]).
+    pub web: Option<String>,
 }
 
 /// Default [`LocalOptions::worker_nice`] (as the server's background pool).
@@ -71,6 +73,7 @@ impl Default for LocalOptions {
         LocalOptions {
             workers: 2,
             worker_threads: None,
+            web: None,
             server_args: Vec::new(),
             worker_args: Vec::new(),
             bin_dir: None,
@@ -175,6 +178,10 @@ impl LocalCluster {
             args.push("--metrics-listen".into());
             args.push("127.0.0.1:0".into());
         }
+        if let Some(w) = &cluster.opts.web {
+            args.push("--web-listen".into());
+            args.push(w.clone());
+        }
         args.extend(cluster.opts.server_args.iter().cloned());
         let p = cluster.spawn_child(SERVER_BIN, &cluster.server_bin.clone(), &args, 0)?;
         let (proc, addr) = cluster.wait_listening(p)?;
@@ -192,6 +199,12 @@ impl LocalCluster {
     /// The server's URL for [`crate::SessionClient::connect`] (`http://127.0.0.1:PORT`).
     pub fn server_url(&self) -> String {
         format!("http://{}", self.server_addr)
+    }
+
+    /// The browser viewer's page URL (`http://127.0.0.1:PORT/`) when started with
+    /// [`LocalOptions::web`].
+    pub fn web_url(&self) -> Option<&str> {
+        self.server.as_ref().and_then(|p| p.web.as_deref())
     }
 
     /// The workers' addresses, in start order (kept across kills and restarts).
@@ -386,6 +399,10 @@ impl LocalCluster {
                             let _ = tx.send(StdoutEvent::Metrics(rest.trim().to_string()));
                             continue;
                         }
+                        if let Some(rest) = line.trim().strip_prefix("web ") {
+                            let _ = tx.send(StdoutEvent::Web(rest.trim().to_string()));
+                            continue;
+                        }
                         if let Some(rest) = line.trim().strip_prefix("listening ") {
                             reported = true;
                             let _ = tx.send(StdoutEvent::Listening(rest.trim().to_string()));
@@ -410,12 +427,16 @@ impl LocalCluster {
 
     fn wait_listening(&self, p: PendingChild) -> Result<(ChildProc, SocketAddr)> {
         let PendingChild { label, bin, child, tail, stderr_thread, stdout_events } = p;
-        let mut proc = ChildProc { child, tail, metrics: None };
+        let mut proc = ChildProc { child, tail, metrics: None, web: None };
         let timeout = self.opts.startup_timeout;
         let deadline = Instant::now() + timeout;
         let mut event = stdout_events.recv_timeout(timeout);
-        while let Ok(StdoutEvent::Metrics(m)) = &event {
-            proc.metrics = m.parse().ok();
+        loop {
+            match &event {
+                Ok(StdoutEvent::Metrics(m)) => proc.metrics = m.parse().ok(),
+                Ok(StdoutEvent::Web(u)) => proc.web = Some(u.clone()),
+                _ => break,
+            }
             event = stdout_events.recv_timeout(deadline.saturating_duration_since(Instant::now()));
         }
         let outcome = match event {
@@ -423,7 +444,7 @@ impl LocalCluster {
                 Ok(a) => return Ok((proc, a)),
                 Err(e) => format!("printed `listening {addr}`, which is not a socket address ({e})"),
             },
-            Ok(StdoutEvent::Metrics(_)) => unreachable!("metrics lines are consumed above"),
+            Ok(StdoutEvent::Metrics(_) | StdoutEvent::Web(_)) => unreachable!("metrics and web lines are consumed above"),
             Ok(StdoutEvent::Closed) | Err(mpsc::RecvTimeoutError::Disconnected) => {
                 // Give the process a moment to exit and its stderr thread to drain.
                 let deadline = Instant::now() + Duration::from_secs(2);
@@ -521,6 +542,7 @@ impl std::fmt::Debug for LocalCluster {
 
 enum StdoutEvent {
     Metrics(String),
+    Web(String),
     Listening(String),
     Closed,
 }
@@ -539,6 +561,8 @@ struct ChildProc {
     tail: Arc<Mutex<VecDeque<String>>>,
     /// Its metrics endpoint, when it printed one.
     metrics: Option<SocketAddr>,
+    /// Its browser viewer's URL, when it printed one (`web <url>`).
+    web: Option<String>,
 }
 
 impl ChildProc {

@@ -185,6 +185,15 @@ struct Args {
     #[arg(long)]
     headless: bool,
 
+    /// Browser viewing: start the local cluster with the server's browser viewer on ADDR
+    /// (e.g. 127.0.0.1:8080; port 0 picks one) and print the page's URL instead of opening
+    /// a window; runs until Ctrl-C. With --token-file the server asks for that token and the
+    /// URL carries it (`#token=…`, never sent to a server by the browser). An address beyond
+    /// loopback needs the server's TLS (`--server-arg --tls-cert …`) or `--server-arg --insecure`.
+    /// The page picks the scene and shader; --scene, --shader and --width preselect them.
+    #[arg(long, value_name = "ADDR", conflicts_with_all = ["server", "headless", "token"])]
+    web: Option<String>,
+
     /// Camera overriding the scene's, any subset of "eye=X,Y,Z target=X,Y,Z up=X,Y,Z
     /// fov=DEG" (sent in `start`; the keys left out keep the scene camera's — for a scene
     /// file that brings a camera, the file's). With --orbit only fov is allowed (the orbit
@@ -320,6 +329,59 @@ impl Args {
     }
 }
 
+/// `--web`: prints the page's URL (with the scene, shader and size preselected, and the
+/// token in the fragment) and keeps the cluster up until Ctrl-C.
+fn serve_web(cluster: &LocalCluster, args: &Args, rt: &tokio::runtime::Runtime, mut stop: watch::Receiver<bool>) -> Result<()> {
+    let Some(base) = cluster.web_url() else { bail!("the server did not print its browser viewer's URL (`web <url>`)") };
+    let token = match &args.token_file {
+        Some(p) => edgepoint_proto::auth::read_token_file(p).map_err(anyhow::Error::msg)?.into_iter().next(),
+        None => None,
+    };
+    let url = web_page_url(base, &args.scene, &args.shader, args.width, token.as_deref());
+    {
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{url}")?;
+        out.flush()?;
+    }
+    tracing::info!("browser viewer at {url} (Ctrl-C stops the cluster)");
+    rt.block_on(async {
+        let _ = stop.wait_for(|s| *s).await;
+    });
+    Ok(())
+}
+
+/// The page URL with `?scene=&shader=&size=` preselections and `#token=`. Query values
+/// are built-in names and numbers (a scene file cannot be picked in the page: it is left out).
+fn web_page_url(base: &str, scene: &str, shader: &str, width: Option<u32>, token: Option<&str>) -> String {
+    let mut q = Vec::new();
+    if edgepoint_scene::builtin::BUILTINS.iter().any(|b| b.0 == scene) {
+        q.push(format!("scene={scene}"));
+    }
+    if edgepoint_proto::shaders::shader(shader).is_some() {
+        q.push(format!("shader={shader}"));
+    }
+    if let Some(w) = width {
+        q.push(format!("size={w}"));
+    }
+    let mut url = base.to_string();
+    if !q.is_empty() {
+        url.push('?');
+        url.push_str(&q.join("&"));
+    }
+    if let Some(t) = token {
+        // Tokens are printable ASCII without spaces; escape what a fragment would misread.
+        url.push_str("#token=");
+        for b in t.bytes() {
+            match b {
+                b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' => url.push(b as char),
+                _ => url.push_str(&format!("%{b:02X}")),
+            }
+        }
+    }
+    url
+}
+
 fn parse_positive_f64(s: &str) -> Result<f64, String> {
     let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
     if !v.is_finite() || v <= 0.0 {
@@ -384,10 +446,15 @@ fn run(args: Args) -> Result<()> {
     let cluster = match &args.server {
         Some(_) => None,
         None => {
+            let mut server_args = args.server_arg.clone();
+            if let (Some(_), Some(f)) = (&args.web, &args.token_file) {
+                server_args.extend(["--token-file".to_string(), f.display().to_string()]);
+            }
             let opts = LocalOptions {
                 workers: args.workers as usize,
                 worker_threads: args.worker_threads.map(|t| t as usize),
-                server_args: args.server_arg.clone(),
+                server_args,
+                web: args.web.clone(),
                 bin_dir: args.bin_dir.clone(),
                 log_level: args.cluster_log.clone(),
                 log_file: args.cluster_log_file.clone(),
@@ -400,6 +467,9 @@ fn run(args: Args) -> Result<()> {
     };
     if stop_flag.load(Ordering::Relaxed) {
         return Ok(());
+    }
+    if let (Some(_), Some(c)) = (&args.web, &cluster) {
+        return serve_web(c, &args, &rt, stop_rx);
     }
     let url = match (&args.server, &cluster) {
         (Some(u), _) => u.clone(),
@@ -718,5 +788,19 @@ fn run_window(
             receiver.abort();
             Ok(())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_web_url_preselects_and_carries_the_token_in_the_fragment() {
+        let u = web_page_url("http://127.0.0.1:8080/", "cornell", "direct", Some(256), Some("abc+def/0123456789"));
+        assert_eq!(u, "http://127.0.0.1:8080/?scene=cornell&shader=direct&size=256#token=abc%2Bdef%2F0123456789");
+        assert_eq!(web_page_url("http://h:1/", "model.ply", "nope", None, None), "http://h:1/", "files and unknown shaders are left out");
+        Args::try_parse_from(["edgepoint-viewer", "--web", "127.0.0.1:0"]).unwrap();
+        assert!(Args::try_parse_from(["edgepoint-viewer", "--web", "127.0.0.1:0", "--server", "http://x:1"]).is_err());
     }
 }
