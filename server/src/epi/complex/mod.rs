@@ -248,15 +248,7 @@ impl Bands {
 /// band, the neighbouring subpixel's region beyond the side it touches, else the mean of
 /// the outer bands.
 fn banded(t: &Tables, input: &ComplexInput, grid: &[Sub; 36], at: (usize, usize), (sx, sy): (usize, usize)) -> Option<Vec3> {
-    // Cells outside the image have no bands (the grid calls them complex, so this is the
-    // check that ends a run there; found by the browser test orbiting at 512²).
-    let cell_bands = |gx: usize, gy: usize| {
-        let (px, py) = ((at.0 + gx / 2).checked_sub(1)?, (at.1 + gy / 2).checked_sub(1)?);
-        if px >= input.flags.width || py >= input.flags.height {
-            return None;
-        }
-        Bands::of(input.bounds, px, py, gx % 2, gy % 2)
-    };
+    let cell_bands = |gx: usize, gy: usize| Bands::of(input.bounds, at.0 + gx / 2 - 1, at.1 + gy / 2 - 1, gx % 2, gy % 2);
     let bands = cell_bands(sx, sy)?;
     let n = bands.n;
     let mut sums = [(Vec3::ZERO, 0u32); 5];
