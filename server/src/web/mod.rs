@@ -272,6 +272,86 @@ mod tests {
         assert!(other.starts_with("HTTP/1.1 403"), "{other}");
     }
 
+    /// A certificate for `localhost` in `dir` (cert.pem, key.pem) and its DER, for a client
+    /// to trust.
+    fn localhost_cert(dir: &std::path::Path) -> rustls::pki_types::CertificateDer<'static> {
+        let key = rcgen::KeyPair::generate().unwrap();
+        let cert = rcgen::CertificateParams::new(vec!["localhost".to_string()]).unwrap().self_signed(&key).unwrap();
+        std::fs::write(dir.join("cert.pem"), cert.pem()).unwrap();
+        std::fs::write(dir.join("key.pem"), key.serialize_pem()).unwrap();
+        cert.der().clone()
+    }
+
+    /// A TLS connection to `addr` trusting only `ca`, for the name `localhost`.
+    async fn tls_to(addr: SocketAddr, ca: &rustls::pki_types::CertificateDer<'static>) -> std::io::Result<tokio_rustls::client::TlsStream<tokio::net::TcpStream>> {
+        let mut roots = rustls::RootCertStore::empty();
+        roots.add(ca.clone()).unwrap();
+        let cfg = rustls::ClientConfig::builder_with_provider(Arc::new(rustls::crypto::ring::default_provider()))
+            .with_safe_default_protocol_versions()
+            .unwrap()
+            .with_root_certificates(roots)
+            .with_no_client_auth();
+        let name = rustls::pki_types::ServerName::try_from("localhost").unwrap();
+        tokio_rustls::TlsConnector::from(Arc::new(cfg)).connect(name, tokio::net::TcpStream::connect(addr).await?).await
+    }
+
+    #[tokio::test]
+    async fn with_tls_the_page_and_its_socket_are_served_over_tls_only() {
+        let dir = std::env::temp_dir().join(format!("edgepoint-web-tls-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ca = localhost_cert(&dir);
+        let tls = edgepoint_proto::net::rustls_server_config(&dir.join("cert.pem"), &dir.join("key.pem")).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        let pool = Arc::new(WorkerPool::new(vec![]).unwrap());
+        let svc = Arc::new(RendererService::new(pool, ServiceConfig { tokens: Some(Arc::new(vec![GOOD.into()])), ..Default::default() }));
+        let l = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = l.local_addr().unwrap();
+        tokio::spawn(serve(l, svc.clone(), WebOptions { tls: Some(tls.clone()), insecure: false }));
+
+        // The page over https.
+        let mut s = tls_to(addr, &ca).await.expect("TLS handshake with the page's server");
+        s.write_all(format!("GET / HTTP/1.1\r\nHost: localhost:{}\r\nConnection: close\r\n\r\n", addr.port()).as_bytes()).await.unwrap();
+        let mut page = Vec::new();
+        tokio::time::timeout(Duration::from_secs(10), s.read_to_end(&mut page)).await.unwrap().ok();
+        let page = String::from_utf8_lossy(&page);
+        assert!(page.starts_with("HTTP/1.1 200") && page.contains("<canvas"), "{page}");
+
+        // The live socket over wss: the token is checked there as on plain connections.
+        for (token, code) in [("wrong-token-0123456789", "UNAUTHENTICATED"), (GOOD, "FAILED_PRECONDITION")] {
+            let stream = tls_to(addr, &ca).await.unwrap();
+            let (mut ws, _) = tokio_tungstenite::client_async(format!("wss://localhost:{}/live", addr.port()), stream).await.expect("wss handshake");
+            ws.send(hello_with(token)).await.unwrap();
+            let mut answer = serde_json::Value::Null;
+            while let Some(Ok(m)) = ws.next().await {
+                if let Message::Text(t) = m {
+                    answer = serde_json::from_str(&t).unwrap();
+                }
+            }
+            assert_eq!(answer["code"], code, "token {token}: {answer}");
+        }
+
+        // Plain HTTP on the TLS port gets no page, and a certificate the client does not
+        // trust is refused by the client.
+        let mut plain = tokio::net::TcpStream::connect(addr).await.unwrap();
+        plain.write_all(b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n").await.unwrap();
+        let mut buf = vec![0u8; 256];
+        let n = tokio::time::timeout(Duration::from_secs(15), plain.read(&mut buf)).await.unwrap().unwrap_or(0);
+        assert!(!String::from_utf8_lossy(&buf[..n]).contains("<canvas"), "plain HTTP on the TLS port");
+        let other_dir = std::env::temp_dir().join(format!("edgepoint-web-tls-other-{}", std::process::id()));
+        std::fs::create_dir_all(&other_dir).unwrap();
+        let other = localhost_cert(&other_dir);
+        let _ = std::fs::remove_dir_all(&other_dir);
+        assert!(tls_to(addr, &other).await.is_err(), "a client trusting another certificate must not connect");
+
+        // Beyond loopback the listener needs TLS and a token (or --insecure), as gRPC does.
+        let open = Arc::new(RendererService::new(Arc::new(WorkerPool::new(vec![]).unwrap()), ServiceConfig::default()));
+        let e = start("0.0.0.0:0", open.clone(), WebOptions::default()).await.unwrap_err().to_string();
+        assert!(e.contains("--web-listen") && e.contains("TLS") && e.contains("token"), "{e}");
+        let e = start("0.0.0.0:0", open.clone(), WebOptions { tls: Some(tls), insecure: false }).await.unwrap_err().to_string();
+        assert!(e.contains("token") && !e.contains("TLS ("), "{e}");
+        assert!(start("0.0.0.0:0", open, WebOptions { tls: None, insecure: true }).await.is_ok(), "--insecure serves unprotected");
+    }
+
     #[test]
     fn the_page_offers_scenes_without_data_files_and_every_shader() {
         let j = info_json(true);
