@@ -72,6 +72,7 @@ fn albedo(o: &edgepoint_scene::Object, tri: usize, bary: Vec3) -> Vec3 {
 pub(crate) fn element_area(scene: &Scene, transforms: &[Affine3A], target: u32) -> f32 {
     let mut total = 0.0f64;
     for (oi, o) in scene.objects.iter().enumerate() {
+        // Diffusely reflecting objects (decided on the untextured base: a texture only scales it).
         if o.material.bsdf.at(Vec3::ONE).diffuse_albedo(Vec3::Z).max_element() > 0.0 {
             let tr = transforms.get(oi).unwrap_or(&o.transform);
             total += (0..o.mesh.triangles.len())
@@ -95,13 +96,7 @@ pub fn tessellate(scene: &Scene, transforms: &[Affine3A], target: u32) -> Vec<El
     let area = |[a, b, c]: [Vec3; 3]| (b - a).cross(c - a).length() * 0.5;
     // Diffusely reflecting objects (decided on the untextured base: a texture only scales it).
     let reflects: Vec<bool> = scene.objects.iter().map(|o| o.material.bsdf.at(Vec3::ONE).diffuse_albedo(Vec3::Z).max_element() > 0.0).collect();
-    let mut total = 0.0f64;
-    for (oi, o) in scene.objects.iter().enumerate() {
-        if reflects[oi] {
-            total += (0..o.mesh.triangles.len()).map(|ti| area(world(oi, ti)) as f64).sum::<f64>();
-        }
-    }
-    let t = (total / target.max(1) as f64) as f32;
+    let t = element_area(scene, transforms, target);
     if !(t > 0.0 && t.is_finite()) {
         return Vec::new();
     }
