@@ -45,6 +45,8 @@ pub fn to_wire(id: u64, epoch: u64, shader: &str, params: &HashMap<String, f64>,
         shader: shader.to_string(),
         params: params.clone(),
         seed: id,
+        // Unpacked: the benches that talk to a worker directly read its answers' `samples`.
+        packed_requests: Vec::new(),
         requests: reqs
             .into_iter()
             .map(|r| pb::ShadeRequest {

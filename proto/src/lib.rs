@@ -23,5 +23,6 @@ pub mod linear_frame;
 pub mod logging;
 pub mod metrics_http;
 pub mod net;
+pub mod packed;
 pub mod shaders;
 pub mod split;

@@ -132,6 +132,8 @@ pub fn pixel_batches<'a>(
             params: spec.params.clone(),
             requests,
             seed: mix64(spec.seed ^ b.wrapping_mul(0x9e37_79b9)),
+            // Packed by the worker link on the way out.
+            packed_requests: Vec::new(),
         }
     })
 }

@@ -77,7 +77,10 @@ impl ShaderWorker for ScriptedWorker {
                             epochs.pop_first();
                         }
                     }
-                    Some(In::Batch(b)) => {
+                    Some(In::Batch(mut b)) => {
+                        // The renderer sends packed requests; this worker answers with
+                        // unpacked samples, which the renderer reads as well.
+                        pb::packed::unpack_request_batch(&mut b).expect("well-formed packed requests");
                         let Some(t) = epochs.get(&b.epoch) else {
                             let _ = tx.send(Err(Status::failed_precondition(format!("epoch {} never sent", b.epoch)))).await;
                             return;

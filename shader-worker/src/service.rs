@@ -194,6 +194,7 @@ fn samples_to_wire(b: &pb::RequestBatch, out: crate::ShadeOutput, shade_ms: f64)
         visible_objects: out.visible,
         shade_ms,
         nonfinite: out.nonfinite,
+        packed_samples: Vec::new(),
     }
 }
 
@@ -359,7 +360,13 @@ impl ShaderWorker for WorkerService {
                             break;
                         }
                     }
-                    Some(shade_in::Msg::Batch(b)) => {
+                    Some(shade_in::Msg::Batch(mut b)) => {
+                        // Packed requests are answered with packed samples (`edgepoint_proto::packed`).
+                        let packed = !b.packed_requests.is_empty();
+                        if let Err(e) = edgepoint_proto::packed::unpack_request_batch(&mut b) {
+                            fail(Status::invalid_argument(format!("batch {}: {e}", b.batch_id))).await;
+                            break;
+                        }
                         let Some(inst) = epochs.by_epoch.get(&b.epoch).cloned() else {
                             fail(Status::failed_precondition(format!(
                                 "batch {} names epoch {}, which was never sent on this stream (known: {:?})",
@@ -394,14 +401,20 @@ impl ShaderWorker for WorkerService {
                             m.shading.inc();
                             let out = tokio::task::spawn_blocking(move || {
                                 let out = pool.install(|| shade_batch_parts(&scene, &inst, &spec, b.seed, &reqs, &parts));
-                                samples_to_wire(&b, out, t.elapsed().as_secs_f64() * 1e3)
+                                let mut batch = samples_to_wire(&b, out, t.elapsed().as_secs_f64() * 1e3);
+                                let n = batch.samples.len();
+                                if packed {
+                                    edgepoint_proto::packed::pack_samples(&batch.samples, &mut batch.packed_samples);
+                                    batch.samples = Vec::new();
+                                }
+                                (batch, n)
                             })
                             .await;
                             m.shading.dec();
                             let msg = match out {
-                                Ok(batch) => {
+                                Ok((batch, n)) => {
                                     m.batches.inc();
-                                    m.samples.inc_by(batch.samples.len() as u64);
+                                    m.samples.inc_by(n as u64);
                                     m.nonfinite.inc_by(batch.nonfinite as u64);
                                     m.batch_seconds.observe(batch.shade_ms / 1e3);
                                     Ok(pb::ShadeOut { msg: Some(shade_out::Msg::Samples(batch)) })

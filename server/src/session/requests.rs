@@ -145,6 +145,8 @@ pub fn build_batches(
             params: spec.params.clone(),
             requests,
             seed: *seed,
+            // Packed by the worker link on the way out.
+            packed_requests: Vec::new(),
         };
         *next_batch_id += 1;
         if spec.parts <= 1 {

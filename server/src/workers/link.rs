@@ -419,8 +419,7 @@ async fn stream_once(
             shared.push_retry(rest);
         }
         wire_id += 1;
-        let mut wire = q.batch.clone();
-        wire.batch_id = wire_id;
+        let wire = to_wire(&q.batch, wire_id);
         let was_alone = inflight.is_empty();
         if tx.try_send(ShadeIn { msg: Some(InMsg::Batch(wire)) }).is_err() {
             requeue(shared, q, true);
@@ -435,6 +434,23 @@ async fn stream_once(
     }
 }
 
+/// The batch as it goes to the worker: under its per-link id, its requests packed
+/// (`edgepoint_proto::packed`: the worker answers with packed samples, which the renderer
+/// reads at a fraction of the protobuf decoding's cost).
+fn to_wire(b: &edgepoint_proto::RequestBatch, wire_id: u64) -> edgepoint_proto::RequestBatch {
+    let mut wire = edgepoint_proto::RequestBatch {
+        batch_id: wire_id,
+        epoch: b.epoch,
+        shader: b.shader.clone(),
+        params: b.params.clone(),
+        requests: Vec::new(),
+        seed: b.seed,
+        packed_requests: Vec::new(),
+    };
+    edgepoint_proto::packed::pack_requests(&b.requests, &mut wire.packed_requests);
+    wire
+}
+
 fn answered(
     shared: &Shared,
     member: &PoolMember,
@@ -444,6 +460,11 @@ fn answered(
     mut b: SampleBatch,
     busy: Duration,
 ) {
+    if let Err(e) = edgepoint_proto::packed::unpack_sample_batch(&mut b) {
+        // Counted below as an answer with the wrong number of samples.
+        tracing::warn!(worker = %member.url, batch = b.batch_id, "unreadable answer: {e}");
+        b.packed_samples = Vec::new();
+    }
     let Some(f) = inflight.remove(b.batch_id) else {
         tracing::debug!(worker = %member.url, batch = b.batch_id, "answer for a batch this link does not hold");
         return;
