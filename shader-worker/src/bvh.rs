@@ -1,11 +1,12 @@
 //! Two-level BVH (DESIGN.md "shader-worker"): one 8-wide BVH per object ([`wide`], built
-//! by obvhs and collapsed here), built once in OBJECT space, and a small top level of the
+//! by binned SAH and collapsed here), built once in OBJECT space, and a small top level of the
 //! same kind over the instances' world boxes, rebuilt per transform epoch in microseconds. A ray is transformed into each candidate instance's object space by
 //! the inverse affine with its direction NOT renormalised, so `t` stays in world units and
 //! hits from different instances compare directly. Moving an object rebuilds nothing of its
 //! own BVH — the property paper 000 §6.5 relies on for moving objects.
 mod collapse;
 mod node_test;
+mod sah_build;
 mod tri4;
 mod wide;
 
@@ -107,6 +108,13 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
         }
         false
     }
+
+    #[inline(always)]
+    fn prefetch(&self, b: u32) {
+        if let Some(block) = self.object.blocks.get(b as usize) {
+            wide::prefetch(block);
+        }
+    }
 }
 
 /// The leaf test of an any-hit query in one object (made as [`ClosestInObject`]).
@@ -124,6 +132,13 @@ impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
         // SAFETY: made only where `N`'s instructions run (see `ClosestInObject`).
         self.hit = unsafe { self.object.blocks[b as usize].any::<N>(r, *t) };
         self.hit
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, b: u32) {
+        if let Some(block) = self.object.blocks.get(b as usize) {
+            wide::prefetch(block);
+        }
     }
 }
 
