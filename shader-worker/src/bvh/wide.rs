@@ -126,8 +126,6 @@ impl<F: FnMut(u32, &mut f32) -> bool> Leaf for F {
     }
 }
 
-const PREFETCH_STEP: bool = false;
-
 /// Asks the CPU to start loading every cache line of `*value` into L1 (a hint: no effect
 /// on results; nothing on targets without a prefetch instruction here).
 #[inline(always)]
@@ -303,10 +301,12 @@ impl Bvh8 {
                         cur = node.child[i];
                         continue;
                     }
-                    // Two or more: start loading every child hit now, so the misses on
-                    // the ones visited after the first overlap each other and the sort
-                    // (perf put half the closest-hit loop's samples on first loads).
-                    let mut m = if PREFETCH_STEP { mask | 1 << i } else { 0 };
+                    // Two or more, closest hit: start loading every child hit now, so the
+                    // misses on the ones visited after the first overlap each other and
+                    // the sort (perf put half the closest-hit loop's samples on first
+                    // loads). Not for any-hit rays, which stop at the first blocker: there
+                    // it measured slower (README, "Worker ray rate").
+                    let mut m = if ORDERED { mask | 1 << i } else { 0 };
                     while m != 0 {
                         let c = node.child[m.trailing_zeros() as usize];
                         m &= m - 1;
