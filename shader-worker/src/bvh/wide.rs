@@ -305,7 +305,7 @@ impl Bvh8 {
                     // misses on the ones visited after the first overlap each other and
                     // the sort (perf put half the closest-hit loop's samples on first
                     // loads). Not for any-hit rays, which stop at the first blocker: there
-                    // it measured slower (README, "Worker ray rate").
+                    // it measured no faster (README, "Worker ray rate").
                     let mut m = if ORDERED { mask | 1 << i } else { 0 };
                     while m != 0 {
                         let c = node.child[m.trailing_zeros() as usize];
