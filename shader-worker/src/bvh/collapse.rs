@@ -1,4 +1,4 @@
-//! obvhs' binary BVH collapsed into 8-wide nodes by the surface area heuristic: the
+//! A binary BVH ([`super::sah_build`]'s, in obvhs' type) collapsed into 8-wide nodes by the surface area heuristic: the
 //! dynamic program of Ylitie, Karras and Laine, "Efficient Incoherent Ray Traversal on
 //! GPUs Through Compressed Wide BVHs" (HPG 2017), §4.1, with this BVH's leaves (one
 //! block of up to [`MAX_LEAF`] primitives tested at once, so a leaf costs the same for 1
@@ -43,7 +43,7 @@ struct Plan {
 /// its children (the children of inner node `n` are `first_index` and `first_index + 1`).
 fn counts_and_order(b2: &Bvh2) -> (Vec<u32>, Vec<u32>) {
     let mut order = Vec::with_capacity(b2.nodes.len());
-    // An explicit stack: PLOC's binary tree may be deep on degenerate meshes.
+    // An explicit stack: the binary tree may be deep on degenerate meshes.
     let mut stack = vec![0u32];
     while let Some(n) = stack.pop() {
         order.push(n);
@@ -69,7 +69,7 @@ fn plan(b2: &Bvh2, counts: &[u32], order: &[u32]) -> Plan {
         let node = &b2.nodes[k];
         let area = node.aabb.half_area();
         if node.is_leaf() {
-            // A binary leaf is always a leaf here (PLOC makes them one primitive each).
+            // A binary leaf (≤ MAX_LEAF primitives) is always a leaf here.
             p.cost[k] = [LEAF_COST * area; 8];
             continue;
         }

@@ -1,6 +1,6 @@
 //! An 8-wide BVH with exact f32 child boxes in structure-of-arrays layout, and its
-//! one-ray traversal. obvhs builds the tree (PLOC + a little reinsertion, a binary BVH
-//! with one primitive per leaf); [`Bvh8::from_bvh2`] collapses it to 8 children per node
+//! one-ray traversal. A binned SAH build makes a binary BVH with leaves of up to 4
+//! primitives ([`super::sah_build`]); [`Bvh8::from_bvh2`] collapses it to 8 children per node
 //! and up to 4 primitives per leaf. Why not obvhs' own `CwBvh` and traversal (the worker's
 //! before): its children's boxes are 8-bit quantised and dequantised on every node visit
 //! with scalar byte-to-float conversions, its leaves hold at most 3 primitives (1.45 per
@@ -14,10 +14,7 @@
 use glam::Vec3A;
 use std::mem::MaybeUninit;
 use obvhs::aabb::Aabb;
-use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
-use obvhs::ploc::PlocBuilder;
-use obvhs::BvhBuildParams;
 #[cfg(test)]
 use super::node_test::Baseline;
 use super::node_test::NodeTest;
@@ -28,7 +25,7 @@ const EMPTY: u32 = u32::MAX;
 pub(super) const LEAF: u32 = 1 << 31;
 /// Stack entries a traversal keeps on the thread's stack: ≤ 7 deferred children per level
 /// of a tree up to 32 levels deep (the dragon's is 9). A deeper tree (a degenerate mesh can
-/// make PLOC's binary tree arbitrarily deep) traverses with a heap stack of its own size.
+/// make the binary tree arbitrarily deep) traverses with a heap stack of its own size.
 const STACK: usize = 7 * 32 + 1;
 
 /// One node: per child, its box as six 8-lane planes (min x, max x, min y, max y, min z,
@@ -115,6 +112,11 @@ pub(super) const EXIT_SLACK: f32 = 1.0 + 4.0 * f32::EPSILON;
 /// function and ran at 0.83× the SSE one.
 pub trait Leaf {
     fn visit(&mut self, payload: u32, tmax: &mut f32) -> bool;
+
+    /// Starts loading what [`Self::visit`] of `payload` will read (a hint; nothing by
+    /// default).
+    #[inline(always)]
+    fn prefetch(&self, _payload: u32) {}
 }
 
 impl<F: FnMut(u32, &mut f32) -> bool> Leaf for F {
@@ -122,6 +124,32 @@ impl<F: FnMut(u32, &mut f32) -> bool> Leaf for F {
     fn visit(&mut self, payload: u32, tmax: &mut f32) -> bool {
         self(payload, tmax)
     }
+}
+
+/// Asks the CPU to start loading every cache line of `*value` into L1 (a hint: no effect
+/// on results; nothing on targets without a prefetch instruction here).
+#[inline(always)]
+pub(super) fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = value as *const T as *const i8;
+        let size = std::mem::size_of::<T>();
+        let mut at = 0;
+        while at < size {
+            // SAFETY: SSE is part of the x86-64 baseline; a prefetch never faults, and the
+            // address is inside `*value`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(at)) };
+            at += 64;
+        }
+        // The last line, which a value not aligned to 64 bytes may reach past the steps.
+        // SAFETY: as above (size > 0 for the types prefetched here).
+        if size > 0 {
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(size - 1)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
 }
 
 /// An 8-wide BVH over some primitives; what a leaf payload means is up to the owner.
@@ -149,9 +177,9 @@ pub struct Bvh8Build {
 pub const MAX_LEAF: u32 = 4;
 
 impl Bvh8 {
-    /// Collapses obvhs' binary BVH into 8-wide nodes with leaves of at most [`MAX_LEAF`]
-    /// primitives, by surface area heuristic ([`super::collapse`]). Child boxes are obvhs'
-    /// exact f32 boxes.
+    /// Collapses a binary BVH (obvhs' type, leaves of at most [`MAX_LEAF`] primitives) into
+    /// 8-wide nodes with leaves of at most [`MAX_LEAF`] primitives, by surface area
+    /// heuristic ([`super::collapse`]). Child boxes are the binary nodes' exact f32 boxes.
     pub fn from_bvh2(b2: &Bvh2) -> Bvh8Build {
         let mut out = Bvh8Build { bvh: Bvh8 { nodes: Vec::new(), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
         if b2.nodes.is_empty() {
@@ -273,6 +301,22 @@ impl Bvh8 {
                         cur = node.child[i];
                         continue;
                     }
+                    // Two or more, closest hit: start loading every child hit now, so the
+                    // misses on the ones visited after the first overlap each other and
+                    // the sort (perf put half the closest-hit loop's samples on first
+                    // loads). Not for any-hit rays, which stop at the first blocker: there
+                    // it measured no faster (README, "Worker ray rate").
+                    let mut m = if ORDERED { mask | 1 << i } else { 0 };
+                    while m != 0 {
+                        let c = node.child[m.trailing_zeros() as usize];
+                        m &= m - 1;
+                        if c & LEAF != 0 {
+                            leaf.prefetch(c & !LEAF);
+                        } else {
+                            // SAFETY: inner child codes index `nodes` (the collapse).
+                            prefetch(unsafe { self.nodes.get_unchecked(c as usize) });
+                        }
+                    }
                     if !ORDERED {
                         // Descend into the first, defer the others as they come.
                         cur = node.child[i];
@@ -341,21 +385,10 @@ pub(super) const EMPTY_NODE: Node8 = Node8 {
     child: [EMPTY; 8],
 };
 
-/// obvhs' binary BVH over `boxes`, one primitive per leaf: PLOC with its `fast_build`
-/// settings and a little reinsertion (what its `CwBvh` builder does before converting).
+/// The binary BVH over `boxes` the collapse starts from: a binned SAH build with leaves of
+/// up to [`MAX_LEAF`] primitives ([`super::sah_build`]).
 pub fn build_bvh2(boxes: &[Aabb]) -> Bvh2 {
-    // obvhs' `medium_build` (search distance 14, more reinsertion) measured no faster
-    // tracing on the dragon within the shared machine's noise, for a slower build.
-    let p = BvhBuildParams::fast_build();
-    let mut b2 = PlocBuilder::with_capacity(boxes.len()).build(
-        p.ploc_search_distance,
-        boxes,
-        (0..boxes.len() as u32).collect(),
-        p.sort_precision,
-        p.search_depth_threshold,
-    );
-    ReinsertionOptimizer::default().run(&mut b2, p.reinsertion_batch_ratio, None);
-    b2
+    super::sah_build::build(boxes)
 }
 
 #[cfg(test)]
@@ -363,7 +396,7 @@ mod tests {
     use super::*;
 
     /// Boxes nested inside each other around one point (all on the same Morton code) and a
-    /// ray through that point: every leaf is visited, whatever depth PLOC's tree takes, on
+    /// ray through that point: every leaf is visited, whatever depth the binary tree takes, on
     /// the fixed stack or the heap one.
     #[test]
     fn every_box_around_the_ray_is_visited_at_any_depth() {
