@@ -365,6 +365,11 @@ impl ShadowFinder {
     pub fn errors(&self, errors: &mut EdgeErrors) -> (Vec<(EdgeSegment, f64)>, usize) {
         errors.update(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
     }
+
+    /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
+    pub fn estimates_missing(&self, errors: &EdgeErrors) -> bool {
+        errors.missing(&self.store, &self.lights, &self.transforms)
+    }
 }
 
 /// Both parts on one thread, for tests, benchmarks and single-threaded callers.

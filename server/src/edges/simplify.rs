@@ -399,6 +399,14 @@ impl EdgeErrors {
         EdgeErrors { rule: gauss_legendre(ORDER), ..Default::default() }
     }
 
+    /// Whether [`Self::update`] would estimate any edge of `store`.
+    pub fn missing(&self, store: &ShadowStore, lights: &[Light], transforms: &[Affine3A]) -> bool {
+        if self.lights != lights || self.transforms != transforms {
+            return store.segment_count() > 0;
+        }
+        store.events_with_edges().any(|((l, _), _, segs)| segs.iter().any(|e| !self.known.contains_key(&key(l, e))))
+    }
+
     /// Every shadow edge of `store` with its error (infinite where none can be estimated:
     /// such an edge always stays), in the store's order, and how many were estimated now.
     pub fn update(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> (Vec<(EdgeSegment, f64)>, usize) {

@@ -244,29 +244,16 @@ impl ShadowThread {
                         m = cv.wait(m).unwrap_or_else(|p| p.into_inner());
                     }
                 };
-                let (stats, ms, segments, simplified) = crate::background::pool().install(|| {
+                let publish = |result: ShadowResult, ms: f64| {
+                    let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
+                    // Updates the frame loop has not taken yet add up: it reports their time.
+                    let earlier = m.result.take().map_or(0.0, |r| r.1);
+                    m.result = Some((Arc::new(result), earlier + ms));
+                };
+                let (stats, ms) = crate::background::pool().install(|| {
                     finder.set_transforms(&job.transforms);
-                    let (stats, mut ms) = finder.update(job.triples);
-                    let mut segments = Vec::with_capacity(stats.segments);
-                    let mut simplified = 0;
-                    if job.simplify_tolerance > 0.0 {
-                        let t = Instant::now();
-                        let (all, estimated) = finder.errors(&mut errors);
-                        simplified = chosen_shadow_edges(&all, job.simplify_tolerance, &mut segments);
-                        let est_ms = t.elapsed().as_secs_f64() * 1e3;
-                        ms += est_ms;
-                        tracing::debug!(edges = all.len(), estimated, left_out = simplified, ms = est_ms, "shadow edges simplified (paper 003)");
-                    } else {
-                        finder.append(None, &mut segments);
-                    }
-                    (stats, ms, segments, simplified)
+                    finder.update(job.triples)
                 });
-                let result = Arc::new(ShadowResult { segments, stats, simplified, tolerance: job.simplify_tolerance });
-                let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
-                // Updates the frame loop has not taken yet add up: it reports their time.
-                let earlier = m.result.take().map_or(0.0, |r| r.1);
-                m.result = Some((result, earlier + ms));
-            });
                 let tolerance = job.simplify_tolerance;
                 if tolerance > 0.0 {
                     // The estimates of new edges can take longer than the update (seconds
