@@ -24,13 +24,13 @@
 //! An edge whose error is below the tolerance can be left out of the EPI; the session
 //! decides (`--simplify-tolerance`, 0: every edge, as before).
 use super::face_bvh::{Face, FaceBvh};
-use super::shadow::ShadowStore;
+use super::shadow::{daffine, ShadowStore};
 use super::EdgeSegment;
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use edgepoint_scene::geometry::ray_triangle;
 use edgepoint_scene::light::spot_falloff;
 use edgepoint_scene::Light;
-use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3};
+use glam::{Affine3A, DAffine3, DVec3, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -158,13 +158,6 @@ pub fn washout_error(band: &Band, light: usize, lights: usize, rule: &[(f64, f64
     }
 }
 
-fn daffine(a: &Affine3A) -> DAffine3 {
-    DAffine3 {
-        matrix3: DMat3::from_cols(a.matrix3.x_axis.as_dvec3(), a.matrix3.y_axis.as_dvec3(), a.matrix3.z_axis.as_dvec3()),
-        translation: a.translation.as_dvec3(),
-    }
-}
-
 /// Rec. 709 luminance: the lights' RGB weighed into one irradiance.
 fn luminance(c: Vec3) -> f64 {
     (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64
@@ -265,7 +258,7 @@ impl<'a> SceneLights<'a> {
                 let to_light = position.as_dvec3() - x;
                 let r2 = to_light.length_squared();
                 let cos = n.dot(to_light) / r2.sqrt();
-                if !(cos > 0.0) || !self.sees(x, position.as_dvec3()) {
+                if cos.is_nan() || cos <= 0.0 || !self.sees(x, position.as_dvec3()) {
                     return 0.0;
                 }
                 let cone = match &self.lights[k] {

@@ -202,7 +202,7 @@ struct ShadowResult {
 pub fn chosen_shadow_edges(errors: &[(EdgeSegment, f64)], tolerance: f64, out: &mut Vec<EdgeSegment>) -> usize {
     let before = out.len();
     if tolerance > 0.0 {
-        out.extend(errors.iter().filter(|(_, e)| !(*e < tolerance)).map(|(s, _)| *s));
+        out.extend(errors.iter().filter(|(_, e)| e.is_nan() || *e >= tolerance).map(|(s, _)| *s));
     } else {
         out.extend(errors.iter().map(|(s, _)| *s));
     }
