@@ -245,17 +245,26 @@ pub fn start_message(
 }
 
 pub fn run(args: FrameArgs) -> Result<()> {
-    let a = &args.scene;
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let source = scene_source_from_arg_in(&a.scene, a.data_dir.as_deref())?;
-    let cluster = start_cluster(a)?;
+    let source = scene_source_from_arg_in(&args.scene.scene, args.scene.data_dir.as_deref())?;
+    let cluster = start_cluster(&args.scene)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     rt.block_on(async {
         let mut settings = args.pace.settings();
         args.reconstruction.apply(&mut settings);
-        let mut start = start_message(&source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
+        let (out, table) = session_report(&cluster, &args, &source, settings).await?;
+        crate::emit(args.json, &out, &table);
+        Ok(())
+    })
+}
+
+/// One session of `args.frames` frames with `settings` on `cluster`: its report (the
+/// fields of `edgepoint-bench frame --json`) and its table.
+pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &pb::SceneSource, settings: pb::Settings) -> Result<(serde_json::Value, String)> {
+        let a = &args.scene;
+        let mut start = start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), settings);
         start.split = a.split.to_wire();
         let t0 = Instant::now();
         let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
@@ -370,7 +379,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
             write_image(&dir.join("last_frame"), args.format, a.width, a.height, &frame_lin)?;
         }
         if !args.no_reference {
-            let refs = references(&cluster, a, &source, &camera).await?;
+            let refs = references(cluster, a, source, &camera).await?;
             let p = psnr(&frame_lin, &refs.converged.pixels);
             let s = ssim(&frame_lin, &refs.converged.pixels, a.width, a.height);
             let p1 = psnr(&refs.one_spp.pixels, &refs.converged.pixels);
@@ -430,9 +439,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
                 out["speedup_vs_full_rt"].as_f64().unwrap_or(0.0),
             )?;
         }
-        crate::emit(args.json, &out, &table);
-        Ok(())
-    })
+        Ok((out, table))
 }
 
 pub fn run_reference(args: ReferenceArgs) -> Result<()> {

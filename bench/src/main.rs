@@ -37,6 +37,8 @@
 //!   with the `embree` feature) in the same process, and the Embree figures.
 //! - `split`: split shading by lights against splitting by pixels on the same workers:
 //!   complete samples/s and request-to-sample latency under light and saturated load.
+//! - `simplify`: several lights (paper 003): a session with every shadow edge against one
+//!   leaving out those other lights wash out: shadow edges, samples per frame, PSNR.
 //! - `speedup`: per scene and shader, an edge-and-point session's median frame time against
 //!   a full 1-spp frame shaded by the same workers (paper 000 Table 2's speedup).
 //! - `exact-area`: the `direct` shader's exact area lights against its sampled ones on one
@@ -59,6 +61,7 @@ mod quality;
 mod rays;
 mod requests;
 mod reference_cache;
+mod simplify;
 mod speedup;
 mod split;
 mod stats;
@@ -131,6 +134,10 @@ enum Cmd {
     /// The direct shader's exact area lights (area=exact) against its sampled soft shadows:
     /// samples/s on one thread and the sampled images' noise against the exact one.
     ExactArea(exact_area::ExactAreaArgs),
+    /// Several lights simplified (paper 003): two sessions, every shadow edge and then those
+    /// other lights do not wash out below --tolerance: shadow edges, samples per frame, PSNR.
+    #[command(after_help = edgepoint_proto::shaders::help_text())]
+    Simplify(simplify::SimplifyArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -155,6 +162,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Split(a) => split::run(a),
         Cmd::Speedup(a) => speedup::run(a),
         Cmd::ExactArea(a) => exact_area::run(a),
+        Cmd::Simplify(a) => simplify::run(a),
     }
 }
 

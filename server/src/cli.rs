@@ -145,6 +145,22 @@ pub struct ServerArgs {
     /// least this many ms, counts as stalled: its batches go to the other workers.
     #[arg(long, value_name = "MS", default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=600_000))]
     pub worker_stall_ms: u64,
+
+    /// Several lights (paper 003): leave out of every session's edge-and-point image the
+    /// shadow edges that other lights wash out — those whose estimated relative L2 error of
+    /// leaving them out is below this (0.05: a step of 5 % of the total light). 0 (default)
+    /// keeps every shadow edge; a viewer's own setting overrides it.
+    #[arg(long, value_name = "T", default_value_t = 0.0, value_parser = parse_simplify_tolerance)]
+    pub simplify_tolerance: f64,
+}
+
+fn parse_simplify_tolerance(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    let (lo, hi) = crate::session::SIMPLIFY_TOLERANCE_RANGE;
+    if !v.is_finite() || v < lo || v > hi {
+        return Err(format!("must be in [{lo}, {hi}] (0 = off), got {s}"));
+    }
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -135,6 +135,7 @@ async fn run(cli: ServerArgs) -> anyhow::Result<()> {
             start_timeout: Duration::from_secs(cli.start_timeout_secs),
             memory: edgepoint_server::session::memory::MemoryBudget::new(memory_limit),
             metrics: metrics.sessions.clone(),
+            simplify_tolerance: cli.simplify_tolerance,
         },
     ));
     let shutdown = service.shutdown_handle();

@@ -68,6 +68,8 @@ pub struct ServiceConfig {
     /// session that would exceed it is refused with RESOURCE_EXHAUSTED.
     pub memory: Arc<MemoryBudget>,
     pub metrics: Arc<SessionMetrics>,
+    /// Sessions' simplification tolerance unless their viewer sets one (paper 003; 0: off).
+    pub simplify_tolerance: f64,
 }
 
 impl std::fmt::Debug for ServiceConfig {
@@ -80,6 +82,7 @@ impl std::fmt::Debug for ServiceConfig {
             .field("tokens", &self.tokens.as_ref().map(|t| format!("{} token(s)", t.len())))
             .field("start_timeout", &self.start_timeout)
             .field("memory_limit", &self.memory.limit())
+            .field("simplify_tolerance", &self.simplify_tolerance)
             .finish()
     }
 }
@@ -95,6 +98,7 @@ impl Default for ServiceConfig {
             start_timeout: DEFAULT_START_TIMEOUT,
             memory: MemoryBudget::unlimited(),
             metrics: Arc::new(SessionMetrics::default()),
+            simplify_tolerance: 0.0,
         }
     }
 }
@@ -361,7 +365,11 @@ impl RendererService {
                 "no shader workers available (give the server --worker URL, --worker-dns HOST:PORT or --workers-file FILE, and check that they run)",
             ));
         }
-        let checked = check_start(&start)?;
+        let mut checked = check_start(&start)?;
+        // The server's default simplification (--simplify-tolerance) unless the viewer chose.
+        if start.settings.as_ref().is_none_or(|s| s.simplify_tolerance.is_none()) {
+            checked.settings.simplify_tolerance = self.cfg.simplify_tolerance;
+        }
         self.check_frame_size(&start)?;
         if let Some(shaders) = self.pool.shaders(SHADER_QUERY_TIMEOUT).await {
             if !shaders.contains(&checked.shader) {

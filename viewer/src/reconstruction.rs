@@ -62,6 +62,20 @@ pub struct ReconstructionArgs {
     /// this angle or more are discontinuities (server default 85).
     #[arg(long, value_name = "DEG", allow_negative_numbers = true, value_parser = parse_cutoff)]
     pub sharp_cutoff: Option<f64>,
+
+    /// Several lights (paper 003): leave out the shadow edges other lights wash out, those
+    /// whose estimated relative L2 error of leaving them out is below T (e.g. 0.05); 0 keeps
+    /// every shadow edge (server default: its --simplify-tolerance, normally 0).
+    #[arg(long, value_name = "T", value_parser = parse_tolerance)]
+    pub simplify_tolerance: Option<f64>,
+}
+
+fn parse_tolerance(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !v.is_finite() || !(0.0..=100.0).contains(&v) {
+        return Err(format!("must be in [0, 100] (0 = off), got {s}"));
+    }
+    Ok(v)
 }
 
 fn parse_cutoff(s: &str) -> Result<f64, String> {
@@ -96,6 +110,9 @@ impl ReconstructionArgs {
         }
         if let Some(c) = self.sharp_cutoff {
             s.sharp_cutoff_degrees = c;
+        }
+        if let Some(t) = self.simplify_tolerance {
+            s.simplify_tolerance = Some(t);
         }
     }
 }
@@ -146,6 +163,13 @@ mod tests {
         assert!(Cli::try_parse_from(["x", "--sharp-cutoff", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--sharp-cutoff", "200"]).is_err());
         assert!(Cli::try_parse_from(["x", "--reconstruction", "magic"]).is_err());
+        let t = Cli::parse_from(["x", "--simplify-tolerance", "0.05"]).r;
+        assert!(t.is_set());
+        let mut s = pb::Settings::default();
+        t.apply(&mut s);
+        assert_eq!(s.simplify_tolerance, Some(0.05));
+        assert!(Cli::try_parse_from(["x", "--simplify-tolerance", "-1"]).is_err());
+        assert!(Cli::try_parse_from(["x", "--simplify-tolerance", "nan"]).is_err());
         assert_eq!(reconstruction_name(1), "epr");
         assert_eq!((overlay_name(2), overlay_name(1), overlay_name(99)), ("edges", "none", "unspecified"));
     }

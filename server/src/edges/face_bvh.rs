@@ -127,6 +127,38 @@ impl FaceBvh {
             .collect();
         FaceBvh { nodes, normals, root, faces, closed: mesh.boundary_edges() == 0 }
     }
+
+    /// Visits the faces of every leaf whose box `overlaps` accepts (a region query: the
+    /// test must be conservative, true for any box the region may meet). `face` returns
+    /// false to stop the whole query early; the query then returns false too.
+    pub fn visit(&self, overlaps: impl Fn(Vec3, Vec3) -> bool, mut face: impl FnMut(&Face) -> bool) -> bool {
+        let Some(root) = &self.root else { return true };
+        if !overlaps(Vec3::from(root.lo), Vec3::from(root.hi)) {
+            return true;
+        }
+        let mut stack = vec![root.child];
+        while let Some(c) = stack.pop() {
+            match c {
+                Child::Empty => {}
+                Child::Leaf { start, count } => {
+                    for f in &self.faces[start as usize..(start + count) as usize] {
+                        if !face(f) {
+                            return false;
+                        }
+                    }
+                }
+                Child::Node(i) => {
+                    let n = &self.nodes[i as usize];
+                    for k in 0..2 {
+                        if n.count[k] != u32::MAX && overlaps(Vec3::from(n.lo[k]), Vec3::from(n.hi[k])) {
+                            stack.push(n.child(k));
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
 }
 
 /// Builds the subtree over `items` (faces `start..` in leaf order) into `nodes` (depth-first,

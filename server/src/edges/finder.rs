@@ -13,6 +13,7 @@ use super::events::VertexRings;
 use super::face_bvh::FaceBvh;
 use super::geometric::{MeshEdgeTrees, SharpTree};
 use super::shadow::{ShadowScene, ShadowStore, ShadowUpdateStats};
+use super::simplify::EdgeErrors;
 use super::{EdgeCounts, EdgeKind, EdgeSegment};
 use crate::session::TripleKey;
 use edgepoint_scene::{Camera, Light, Mesh, Progress, Scene};
@@ -356,6 +357,19 @@ impl ShadowFinder {
     pub fn store(&self) -> &ShadowStore {
         &self.store
     }
+
+    /// Every stored shadow edge with paper 003's estimate of the error of leaving it out
+    /// ([`super::simplify`]), at the lights and transforms of the last update; `errors`
+    /// keeps the estimates of edges that did not change. Also returns how many edges were
+    /// estimated now.
+    pub fn errors(&self, errors: &mut EdgeErrors) -> (Vec<(EdgeSegment, f64)>, usize) {
+        errors.update(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
+    }
+
+    /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
+    pub fn estimates_missing(&self, errors: &EdgeErrors) -> bool {
+        errors.missing(&self.store, &self.lights, &self.transforms)
+    }
 }
 
 /// Both parts on one thread, for tests, benchmarks and single-threaded callers.
@@ -450,6 +464,11 @@ impl EdgeFinder {
     /// The shadow store (for inspection and benchmarks).
     pub fn store(&self) -> &ShadowStore {
         self.shadows.store()
+    }
+
+    /// See [`ShadowFinder::errors`].
+    pub fn errors(&self, errors: &mut EdgeErrors) -> (Vec<(EdgeSegment, f64)>, usize) {
+        self.shadows.errors(errors)
     }
 }
 

@@ -16,6 +16,7 @@ pub mod geometric;
 pub mod interval;
 pub mod sample;
 pub mod shadow;
+pub mod simplify;
 pub mod tree;
 pub mod umbra;
 pub mod wedge;

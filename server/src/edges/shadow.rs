@@ -122,7 +122,8 @@ pub struct ShadowStore {
     pairs: BTreeMap<(u32, u32), Pair>,
 }
 
-fn daffine(a: &Affine3A) -> DAffine3 {
+/// An object transform in f64 (wedges and bands are computed in f64).
+pub(crate) fn daffine(a: &Affine3A) -> DAffine3 {
     DAffine3 {
         matrix3: DMat3::from_cols(a.matrix3.x_axis.as_dvec3(), a.matrix3.y_axis.as_dvec3(), a.matrix3.z_axis.as_dvec3()),
         translation: a.translation.as_dvec3(),

@@ -16,12 +16,18 @@
 //!   edges published. After a move the previous shadow edges stay up until the update
 //!   lands, typically a frame later.
 //!
+//! - Several lights (paper 003): with a simplification tolerance above 0 the shadow thread
+//!   also estimates, per shadow edge, the error of leaving it out where the other lights
+//!   wash it out ([`crate::edges::simplify`]), and publishes only the edges at or above
+//!   the tolerance. At 0 nothing is estimated and every edge goes to the EPI.
+//!
 //! Both the build and the updates run on the [`crate::background`] pool, never on the
 //! global pool the frame loop's per-pixel passes use.
 use super::TripleKey;
 use crate::edges::brute::scene_edges;
 use crate::edges::finder::{GeometricFinder, SceneEdgeIndex, ShadowFinder, ViewVolume};
 use crate::edges::shadow::ShadowUpdateStats;
+use crate::edges::simplify::EdgeErrors;
 use crate::edges::EdgeSegment;
 use edgepoint_scene::{Progress, Scene};
 use glam::{Affine3A, Vec3};
@@ -41,6 +47,11 @@ pub struct EdgeSourceStats {
     pub shadow_update_ms: f64,
     /// The last finished shadow update.
     pub shadow: ShadowUpdateStats,
+    /// Shadow edges the last published result left out as washed out by other lights
+    /// (paper 003; 0 with simplification off).
+    pub shadow_simplified: usize,
+    /// The simplification tolerance that result was chosen at.
+    pub shadow_tolerance: f64,
 }
 
 /// A session's edge finding: brute force until the index is ready, then the trees on the
@@ -60,6 +71,7 @@ struct Running {
     /// What was last posted, to post again only on change.
     posted_transforms: Vec<Affine3A>,
     posted_triples: usize,
+    posted_tolerance: f64,
 }
 
 impl SessionEdges {
@@ -90,7 +102,9 @@ impl SessionEdges {
     }
 
     /// This frame's edges into `out` (cleared first): the geometric edges seen from `eye`
-    /// with the objects at `transforms`, and the newest shadow edges of `triples`.
+    /// with the objects at `transforms`, and the newest shadow edges of `triples` — those
+    /// other lights do not wash out below `simplify_tolerance` (0: all of them).
+    #[allow(clippy::too_many_arguments)]
     pub fn find(
         &mut self,
         transforms: &[Affine3A],
@@ -98,6 +112,7 @@ impl SessionEdges {
         view: &ViewVolume,
         triples: &dyn TripleSet,
         sharp_cutoff_degrees: f32,
+        simplify_tolerance: f64,
         out: &mut Vec<EdgeSegment>,
     ) -> EdgeSourceStats {
         out.clear();
@@ -111,11 +126,12 @@ impl SessionEdges {
             return EdgeSourceStats::default();
         };
         r.geometric.edges(transforms, eye, Some(view), sharp_cutoff_degrees, out);
-        if r.posted_transforms != transforms || r.posted_triples != triples.len() {
+        if r.posted_transforms != transforms || r.posted_triples != triples.len() || r.posted_tolerance != simplify_tolerance {
             r.posted_transforms.clear();
             r.posted_transforms.extend_from_slice(transforms);
             r.posted_triples = triples.len();
-            r.shadows.post(ShadowJob { transforms: transforms.to_vec(), triples: triples.keys() });
+            r.posted_tolerance = simplify_tolerance;
+            r.shadows.post(ShadowJob { transforms: transforms.to_vec(), triples: triples.keys(), simplify_tolerance });
         }
         let mut stats = EdgeSourceStats { trees: true, ..Default::default() };
         if let Some((result, ms)) = r.shadows.take() {
@@ -123,6 +139,8 @@ impl SessionEdges {
             stats.shadow_update_ms = ms;
         }
         stats.shadow = r.current.stats;
+        stats.shadow_simplified = r.current.simplified;
+        stats.shadow_tolerance = r.current.tolerance;
         out.extend_from_slice(&r.current.segments);
         stats
     }
@@ -155,6 +173,7 @@ impl Running {
             current: Arc::new(ShadowResult::default()),
             posted_transforms: Vec::new(),
             posted_triples: usize::MAX,
+            posted_tolerance: 0.0,
         })
     }
 }
@@ -163,13 +182,31 @@ impl Running {
 struct ShadowJob {
     transforms: Vec<Affine3A>,
     triples: Vec<TripleKey>,
+    simplify_tolerance: f64,
 }
 
-/// What the shadow thread publishes: every stored shadow edge, world space.
+/// What the shadow thread publishes: the stored shadow edges that go to the EPI, world
+/// space, and how many the simplification left out.
 #[derive(Default)]
 struct ShadowResult {
     segments: Vec<EdgeSegment>,
     stats: ShadowUpdateStats,
+    simplified: usize,
+    tolerance: f64,
+}
+
+/// The shadow edges that go to the EPI (appended to `out`): every one at tolerance 0
+/// (simplification off: today's edges exactly), else those whose estimated error of
+/// leaving them out ([`crate::edges::simplify`]) is not below the tolerance. Returns how
+/// many were left out.
+pub fn chosen_shadow_edges(errors: &[(EdgeSegment, f64)], tolerance: f64, out: &mut Vec<EdgeSegment>) -> usize {
+    let before = out.len();
+    if tolerance > 0.0 {
+        out.extend(errors.iter().filter(|(_, e)| e.is_nan() || *e >= tolerance).map(|(s, _)| *s));
+    } else {
+        out.extend(errors.iter().map(|(s, _)| *s));
+    }
+    errors.len() - (out.len() - before)
 }
 
 /// Between the frame loop and the shadow thread: the newest job (an older one not yet
@@ -189,6 +226,7 @@ struct ShadowThread {
 impl ShadowThread {
     fn spawn(mut finder: ShadowFinder) -> Option<ShadowThread> {
         let shared: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
+        let mut errors = EdgeErrors::new();
         let s = shared.clone();
         let thread = std::thread::Builder::new()
             .name("shadow-edges".into())
@@ -206,18 +244,37 @@ impl ShadowThread {
                         m = cv.wait(m).unwrap_or_else(|p| p.into_inner());
                     }
                 };
-                let (stats, ms, segments) = crate::background::pool().install(|| {
+                let publish = |result: ShadowResult, ms: f64| {
+                    let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
+                    // Updates the frame loop has not taken yet add up: it reports their time.
+                    let earlier = m.result.take().map_or(0.0, |r| r.1);
+                    m.result = Some((Arc::new(result), earlier + ms));
+                };
+                let (stats, ms) = crate::background::pool().install(|| {
                     finder.set_transforms(&job.transforms);
-                    let (stats, ms) = finder.update(job.triples);
+                    finder.update(job.triples)
+                });
+                let tolerance = job.simplify_tolerance;
+                if tolerance > 0.0 {
+                    // The estimates of new edges can take longer than the update (seconds
+                    // on `rooms`): every edge goes out first, so shadows show meanwhile.
+                    if finder.estimates_missing(&errors) {
+                        let mut segments = Vec::with_capacity(stats.segments);
+                        finder.append(None, &mut segments);
+                        publish(ShadowResult { segments, stats, simplified: 0, tolerance: 0.0 }, ms);
+                    }
+                    let t = Instant::now();
+                    let (all, estimated) = crate::background::pool().install(|| finder.errors(&mut errors));
+                    let mut segments = Vec::with_capacity(all.len());
+                    let simplified = chosen_shadow_edges(&all, tolerance, &mut segments);
+                    let est_ms = t.elapsed().as_secs_f64() * 1e3;
+                    tracing::debug!(edges = all.len(), estimated, left_out = simplified, ms = est_ms, "shadow edges simplified (paper 003)");
+                    publish(ShadowResult { segments, stats, simplified, tolerance }, est_ms);
+                } else {
                     let mut segments = Vec::with_capacity(stats.segments);
                     finder.append(None, &mut segments);
-                    (stats, ms, segments)
-                });
-                let result = Arc::new(ShadowResult { segments, stats });
-                let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
-                // Updates the frame loop has not taken yet add up: it reports their time.
-                let earlier = m.result.take().map_or(0.0, |r| r.1);
-                m.result = Some((result, earlier + ms));
+                    publish(ShadowResult { segments, stats, simplified: 0, tolerance }, ms);
+                }
             })
             .map_err(|e| tracing::error!("cannot start the shadow-edge thread ({e}); no shadow edges in this session"))
             .ok()?;
@@ -268,12 +325,24 @@ mod tests {
         triples: &HashMap<TripleKey, ()>,
         done: impl Fn(&EdgeSourceStats, &[EdgeSegment]) -> bool,
     ) -> Vec<EdgeSegment> {
+        run_until_at(edges, scene, t, triples, 0.0, done).0
+    }
+
+    /// [`run_until`] with a simplification tolerance; also returns the last stats.
+    fn run_until_at(
+        edges: &mut SessionEdges,
+        scene: &Scene,
+        t: &[Affine3A],
+        triples: &HashMap<TripleKey, ()>,
+        tolerance: f64,
+        done: impl Fn(&EdgeSourceStats, &[EdgeSegment]) -> bool,
+    ) -> (Vec<EdgeSegment>, EdgeSourceStats) {
         let deadline = Instant::now() + Duration::from_secs(60);
         let mut out = Vec::new();
         loop {
-            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, &mut out);
+            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, tolerance, &mut out);
             if done(&st, &out) {
-                return out;
+                return (out, st);
             }
             assert!(Instant::now() < deadline, "edge source did not get there in time");
             std::thread::sleep(Duration::from_millis(5));
@@ -302,7 +371,7 @@ mod tests {
         }
         // Whatever finder is in use, the geometric edges are the brute-force ones.
         let mut first = Vec::new();
-        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, &mut first);
+        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, 0.0, &mut first);
         let mut brute = Vec::new();
         scene_edges(&scene, &t, scene.camera.eye, 85.0, &mut brute);
         let geo = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| s.kind.is_geometric()).collect::<Vec<_>>());
@@ -336,6 +405,37 @@ mod tests {
         };
         let got_moved = run_until(&mut edges, &scene, &moved, &triples, |_, out| shadows(out) == want_moved);
         assert_eq!(shadows(&got_moved), want_moved);
+
+        // Simplification on (paper 003): with cornell's one light every shadow edge bounds
+        // light no other light replaces, so a tolerance of 0.1 keeps them all; an absurd
+        // one (10: more than the whole light) leaves out every edge it could estimate, and
+        // back at 0 every edge is there again.
+        let n = want_moved.len();
+        let (kept, st) = run_until_at(&mut edges, &scene, &moved, &triples, 0.1, |st, _| st.shadow_tolerance == 0.1);
+        assert_eq!((shadows(&kept), st.shadow_simplified), (want_moved.clone(), 0));
+        let (few, st) = run_until_at(&mut edges, &scene, &moved, &triples, 10.0, |st, _| st.shadow_tolerance == 10.0);
+        assert_eq!(shadows(&few).len() + st.shadow_simplified, n);
+        assert!(st.shadow_simplified > n / 2, "{} of {n} left out", st.shadow_simplified);
+        let back = run_until(&mut edges, &scene, &moved, &triples, |st, _| st.shadow_tolerance == 0.0);
+        assert_eq!(shadows(&back), want_moved);
+    }
+
+    /// Tolerance 0 is off: every edge goes to the EPI, whatever its estimate (even 0).
+    #[test]
+    fn tolerance_zero_leaves_the_shadow_edges_unchanged() {
+        let seg = |x: f32, k: EdgeKind| EdgeSegment { a: Vec3::new(x, 0.0, 0.0), b: Vec3::new(x, 0.0, 1.0), kind: k, object: 3 };
+        let errors = vec![
+            (seg(0.0, EdgeKind::ShadowUmbral), 0.0),
+            (seg(1.0, EdgeKind::ShadowPenumbral), 1e-9),
+            (seg(2.0, EdgeKind::ShadowHard), 0.3),
+            (seg(3.0, EdgeKind::ShadowHard), f64::INFINITY),
+        ];
+        let mut out = vec![seg(9.0, EdgeKind::Silhouette)];
+        assert_eq!(chosen_shadow_edges(&errors, 0.0, &mut out), 0);
+        assert_eq!(out[1..], errors.iter().map(|e| e.0).collect::<Vec<_>>()[..]);
+        let mut out = Vec::new();
+        assert_eq!(chosen_shadow_edges(&errors, 0.3, &mut out), 2);
+        assert_eq!(out, vec![errors[2].0, errors[3].0]);
     }
 
     #[test]

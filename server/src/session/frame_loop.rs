@@ -365,6 +365,7 @@ impl FrameLoop {
                 &view,
                 &self.feedback.triples,
                 s.sharp_cutoff_degrees,
+                s.simplify_tolerance,
                 &mut self.edges,
             );
             self.times.add(STAGE_EDGES, ms_since(t));

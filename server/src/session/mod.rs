@@ -30,7 +30,7 @@ pub use progress::ViewerProgress;
 pub use requests::{build_batches, BatchSpec, RequestInfo, RequestRing};
 pub use settings::{
     camera_from_wire, camera_to_wire, resolve_move, Reconstruction, SessionSettings, BATCH_SIZE_RANGE, MAX_AGE_RANGE,
-    MAX_FPS_RANGE, SHARP_CUTOFF_RANGE, SPARSENESS_RANGE,
+    MAX_FPS_RANGE, SHARP_CUTOFF_RANGE, SIMPLIFY_TOLERANCE_RANGE, SPARSENESS_RANGE,
 };
 
 use crate::workers::Dispatcher;

@@ -55,6 +55,9 @@ pub struct SessionSettings {
     pub overlay: Overlay,
     /// Dihedral angle (degrees) at or above which a forward-facing edge is sharp (§6.2).
     pub sharp_cutoff_degrees: f32,
+    /// Shadow edges whose estimated error of leaving them out is below this are left out
+    /// of the EPI (paper 003, [`crate::edges::simplify`]); 0: off.
+    pub simplify_tolerance: f64,
 }
 
 impl Default for SessionSettings {
@@ -70,6 +73,7 @@ impl Default for SessionSettings {
             complex_filter: true,
             overlay: Overlay::None,
             sharp_cutoff_degrees: crate::edges::DEFAULT_SHARP_CUTOFF_DEGREES,
+            simplify_tolerance: 0.0,
         }
     }
 }
@@ -78,6 +82,9 @@ pub const SPARSENESS_RANGE: (f64, f64) = (1.0, 1.0e6);
 pub const MAX_FPS_RANGE: (f64, f64) = (0.1, 1000.0);
 pub const BATCH_SIZE_RANGE: (u32, u32) = (1, 65_536);
 pub const MAX_AGE_RANGE: (f64, f64) = (1.0, 1.0e7);
+/// Simplification tolerances accepted (0: off; a relative error, so 1 already drops
+/// nearly every shadow edge).
+pub const SIMPLIFY_TOLERANCE_RANGE: (f64, f64) = (0.0, 100.0);
 /// Sharp-edge cut-off angles accepted (degrees; 0 on the wire keeps the current value).
 pub const SHARP_CUTOFF_RANGE: (f64, f64) = (0.0, 180.0);
 
@@ -114,6 +121,13 @@ impl SessionSettings {
                 return Err(format!("settings.batch_size must be in [{lo}, {hi}] (or 0 to keep), got {}", s.batch_size));
             }
             out.batch_size = s.batch_size;
+        }
+        if let Some(v) = s.simplify_tolerance {
+            let (lo, hi) = SIMPLIFY_TOLERANCE_RANGE;
+            if !v.is_finite() || v < lo || v > hi {
+                return Err(format!("settings.simplify_tolerance must be in [{lo}, {hi}] (0 = off), got {v}"));
+            }
+            out.simplify_tolerance = v;
         }
         if s.set_paused {
             out.paused = s.paused;
@@ -233,6 +247,10 @@ mod tests {
             .unwrap();
         assert_eq!((r.reconstruction, r.overlay, r.complex_filter, r.sharp_cutoff_degrees), (Reconstruction::RenderCache, Overlay::Classes, false, 30.0));
         assert_eq!(r.with(&pb::Settings::default()).unwrap(), r, "unspecified keeps");
+        let simp = r.with(&pb::Settings { simplify_tolerance: Some(0.05), ..Default::default() }).unwrap();
+        assert_eq!(simp.simplify_tolerance, 0.05);
+        assert_eq!(simp.with(&pb::Settings::default()).unwrap().simplify_tolerance, 0.05, "unset keeps");
+        assert_eq!(simp.with(&pb::Settings { simplify_tolerance: Some(0.0), ..Default::default() }).unwrap().simplify_tolerance, 0.0, "0 turns it off");
         let back = r.with(&pb::Settings { reconstruction: 1, overlay: 1, complex_filter: Some(true), ..Default::default() }).unwrap();
         assert_eq!((back.reconstruction, back.overlay, back.complex_filter), (Reconstruction::EdgeAndPoint, Overlay::None, true));
         for bad in [
@@ -241,6 +259,9 @@ mod tests {
             pb::Settings { sharp_cutoff_degrees: 181.0, ..Default::default() },
             pb::Settings { sharp_cutoff_degrees: -5.0, ..Default::default() },
             pb::Settings { sharp_cutoff_degrees: f64::NAN, ..Default::default() },
+            pb::Settings { simplify_tolerance: Some(-0.1), ..Default::default() },
+            pb::Settings { simplify_tolerance: Some(f64::NAN), ..Default::default() },
+            pb::Settings { simplify_tolerance: Some(1e3), ..Default::default() },
         ] {
             let e = s.with(&bad).unwrap_err();
             assert!(e.starts_with("settings."), "{e}");

@@ -1,0 +1,445 @@
+//! Several lights simplified (paper 003, Drettakis, "Simplifying the Representation of
+//! Radiance from Multiple Emitters": §4.1 extremal boundaries, §5.1–5.2 the L2 error of a
+//! simplified representation by Gauss–Legendre quadrature, §6 several sources), applied to
+//! the shadow edges the edge-and-point image draws.
+//!
+//! The shadow store already holds only the extremal boundaries of every light's shadows —
+//! the maximal (penumbral) and minimal (umbral) boundary of each blocker's shadow from an
+//! area light ([`super::umbra`]), the hard edge of a point light's — and no detail inside
+//! the penumbra: that is paper 003's first pass. This module is its second: per shadow edge
+//! of light `l`, whether the other lights wash it out. It takes a band on the receiver
+//! across the edge, on each side as wide as `l`'s penumbra there (a small fraction of the
+//! distance to the light for a point light, whose penumbra has no width), and estimates the
+//! L2 error of reconstructing without the edge: `l`'s exact irradiance against its linear
+//! interpolation from the band's two sides (without the edge the EPI blends the samples
+//! on either side across it, as §5.2's simplified interpolant spans the light face),
+//! relative to the mean total irradiance of all lights over the band. Both integrals are
+//! Gauss–Legendre quadratures (§5.1), over each half of the band separately: the edge
+//! splits the band, so each half is smooth in `l`'s irradiance and the rule integrates a
+//! step or a kink at the edge exactly. The irradiance at the nodes is exact — Lambert's
+//! formula over the backprojection ([`edgepoint_scene::backprojection`]) for an area light,
+//! a shadow ray for a point or spot light — with every object of the scene as a blocker,
+//! found through the receivers' face hierarchies.
+//!
+//! An edge whose error is below the tolerance can be left out of the EPI; the session
+//! decides (`--simplify-tolerance`, 0: every edge, as before).
+use super::face_bvh::{Face, FaceBvh};
+use super::shadow::{daffine, ShadowStore};
+use super::EdgeSegment;
+use edgepoint_scene::backprojection::{LightPlane, Visible};
+use edgepoint_scene::geometry::ray_triangle;
+use edgepoint_scene::light::spot_falloff;
+use edgepoint_scene::Light;
+use glam::{Affine3A, DAffine3, DVec3, Vec3};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// Quadrature points per dimension (and per half band): exact for polynomials of degree
+/// 5 in each direction, 18 nodes and 6 side values per edge and light.
+pub const ORDER: usize = 3;
+
+/// A point light's band, on each side, as a fraction of the distance to the light: its
+/// shadow edge is a step, whose error does not depend on the band's width; the width only
+/// decides how much of the other lights' variation nearby is weighed in.
+pub const POINT_BAND: f64 = 0.02;
+
+/// `P_n(x)` and `P_n'(x)` by the three-term recurrence.
+fn legendre(n: usize, x: f64) -> (f64, f64) {
+    let (mut p0, mut p1) = (1.0, x);
+    for k in 2..=n {
+        let k = k as f64;
+        let p2 = ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k;
+        p0 = p1;
+        p1 = p2;
+    }
+    if n == 0 {
+        return (1.0, 0.0);
+    }
+    (p1, n as f64 * (x * p1 - p0) / (x * x - 1.0))
+}
+
+/// The n-point Gauss–Legendre rule on [−1, 1] as (node, weight): the roots of `P_n`, by
+/// Newton's method from the Chebyshev guesses. Exact for polynomials of degree ≤ 2n − 1.
+pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
+            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            for _ in 0..100 {
+                let (p, dp) = legendre(n, x);
+                let dx = p / dp;
+                x -= dx;
+                if dx.abs() <= 1e-16 {
+                    break;
+                }
+            }
+            let (_, dp) = legendre(n, x);
+            (x, 2.0 / ((1.0 - x * x) * dp * dp))
+        })
+        .collect()
+}
+
+/// ∫ f over [lo, hi] by `rule`, for K integrands at once.
+pub fn integrate<const K: usize>(rule: &[(f64, f64)], lo: f64, hi: f64, mut f: impl FnMut(f64) -> [f64; K]) -> [f64; K] {
+    let (half, mid) = (0.5 * (hi - lo), 0.5 * (hi + lo));
+    let mut sum = [0.0; K];
+    for &(x, w) in rule {
+        let v = f(mid + half * x);
+        for k in 0..K {
+            sum[k] += w * half * v[k];
+        }
+    }
+    sum
+}
+
+/// The region of one edge's estimate: the parallelogram `a + s (b − a) + t h across`,
+/// `s ∈ [0, 1]`, `t ∈ [−1, 1]`, in the receiver's tangent plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Band {
+    pub a: DVec3,
+    pub b: DVec3,
+    /// The receiver's unit normal, on the side facing the edge's light.
+    pub normal: DVec3,
+    /// Unit, in the tangent plane, perpendicular to the edge.
+    pub across: DVec3,
+    pub half_width: f64,
+}
+
+impl Band {
+    /// `None` for a zero-length edge, an edge along the normal or a width that is not
+    /// positive and finite.
+    pub fn new(a: DVec3, b: DVec3, normal: DVec3, half_width: f64) -> Option<Band> {
+        let normal = normal.try_normalize()?;
+        let across = normal.cross(b - a).try_normalize()?;
+        (half_width > 0.0 && half_width.is_finite()).then_some(Band { a, b, normal, across, half_width })
+    }
+
+    pub fn point(&self, s: f64, t: f64) -> DVec3 {
+        self.a + (self.b - self.a) * s + self.across * (t * self.half_width)
+    }
+}
+
+/// Paper 003's estimate for an edge of light `light` over `band`: the RMS, over the band,
+/// of `light`'s irradiance minus its linear interpolation across the band from the two
+/// sides, over the band's mean total irradiance of all `lights`. `irradiance(k, x, n)` is
+/// light k's irradiance at x (unit normal n). 0 where nothing differs (or no light at all
+/// reaches the band and its sides), infinite where the sides are lit but the band is not.
+pub fn washout_error(band: &Band, light: usize, lights: usize, rule: &[(f64, f64)], mut irradiance: impl FnMut(usize, DVec3, DVec3) -> f64) -> f64 {
+    let n = band.normal;
+    let [sq, total] = integrate(rule, 0.0, 1.0, |s| {
+        let lo = irradiance(light, band.point(s, -1.0), n);
+        let hi = irradiance(light, band.point(s, 1.0), n);
+        let mut across = |t: f64| {
+            let x = band.point(s, t);
+            let mut all = 0.0;
+            let mut own = 0.0;
+            for k in 0..lights {
+                let e = irradiance(k, x, n);
+                all += e;
+                if k == light {
+                    own = e;
+                }
+            }
+            let lin = lo + (hi - lo) * 0.5 * (t + 1.0);
+            [(own - lin) * (own - lin), all]
+        };
+        // The edge is at t = 0: each half on its own, so a step there is integrated exactly.
+        let [a0, a1] = integrate(rule, -1.0, 0.0, &mut across);
+        let [b0, b1] = integrate(rule, 0.0, 1.0, &mut across);
+        [a0 + b0, a1 + b1]
+    });
+    // The band's measure in (s, t) is 2.
+    let (rms, mean_total) = ((sq / 2.0).max(0.0).sqrt(), total / 2.0);
+    if rms == 0.0 {
+        0.0
+    } else if mean_total > 0.0 {
+        rms / mean_total
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Rec. 709 luminance: the lights' RGB weighed into one irradiance.
+fn luminance(c: Vec3) -> f64 {
+    (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64
+}
+
+/// Whether the box may meet the convex region on the inner side of every plane (normal,
+/// a point of it).
+fn box_meets(planes: &[(DVec3, DVec3)], lo: Vec3, hi: Vec3) -> bool {
+    let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+    planes.iter().all(|(m, p)| {
+        let far = DVec3::select(m.cmpgt(DVec3::ZERO), hi, lo);
+        m.dot(far - *p) >= 0.0
+    })
+}
+
+/// Whether segment p → q meets the box (slab test).
+fn segment_meets(p: DVec3, q: DVec3, lo: Vec3, hi: Vec3) -> bool {
+    let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+    let d = q - p;
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for k in 0..3 {
+        if d[k].abs() < 1e-300 {
+            if p[k] < lo[k] || p[k] > hi[k] {
+                return false;
+            }
+            continue;
+        }
+        let (a, b) = ((lo[k] - p[k]) / d[k], (hi[k] - p[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+        if t0 > t1 {
+            return false;
+        }
+    }
+    true
+}
+
+/// The scene as the estimate needs it: its lights, and every object's faces (object space,
+/// in its face hierarchy) at its current transform.
+pub struct SceneLights<'a> {
+    lights: &'a [Light],
+    planes: Vec<Option<LightPlane>>,
+    weights: Vec<f64>,
+    bvhs: &'a [FaceBvh],
+    to_world: Vec<DAffine3>,
+    to_object: Vec<DAffine3>,
+}
+
+impl<'a> SceneLights<'a> {
+    pub fn new(lights: &'a [Light], bvhs: &'a [FaceBvh], transforms: &[Affine3A]) -> SceneLights<'a> {
+        let to_world: Vec<DAffine3> = (0..bvhs.len()).map(|o| daffine(transforms.get(o).unwrap_or(&Affine3A::IDENTITY))).collect();
+        SceneLights {
+            lights,
+            planes: lights.iter().map(|l| if let Light::Area { vertices, .. } = l { LightPlane::new(vertices) } else { None }).collect(),
+            weights: lights
+                .iter()
+                .map(|l| match l {
+                    Light::Area { radiance, .. } => luminance(*radiance),
+                    Light::Point { intensity, .. } | Light::Spot { intensity, .. } => luminance(*intensity),
+                })
+                .collect(),
+            to_object: to_world.iter().map(|t| t.inverse()).collect(),
+            to_world,
+            bvhs,
+        }
+    }
+
+    pub fn lights(&self) -> usize {
+        self.lights.len()
+    }
+
+    /// Irradiance (luminance) at `x`, unit normal `n`, from light `k`, exact: every object
+    /// blocks.
+    pub fn irradiance(&self, k: usize, x: DVec3, n: DVec3) -> f64 {
+        match &self.lights[k] {
+            Light::Area { .. } => {
+                let Some(plane) = &self.planes[k] else { return 0.0 };
+                let Some(mut vis) = Visible::new(plane, x.as_vec3(), n.as_vec3()) else { return 0.0 };
+                let (apex, base) = vis.pyramid();
+                let (apex, base) = (apex, base.to_vec());
+                for o in 0..self.bvhs.len() {
+                    let (w, to) = (&self.to_world[o], &self.to_object[o]);
+                    let planes = pyramid_planes(to.transform_point3(apex), &base.iter().map(|b| to.transform_point3(*b)).collect::<Vec<_>>());
+                    let go = self.bvhs[o].visit(
+                        |lo, hi| box_meets(&planes, lo, hi),
+                        |f: &Face| {
+                            vis.occlude(f.v.map(|v| w.transform_point3(v.as_dvec3())));
+                            !vis.is_empty()
+                        },
+                    );
+                    if !go {
+                        return 0.0;
+                    }
+                }
+                vis.irradiance() * self.weights[k]
+            }
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                let to_light = position.as_dvec3() - x;
+                let r2 = to_light.length_squared();
+                let cos = n.dot(to_light) / r2.sqrt();
+                if cos.is_nan() || cos <= 0.0 || !self.sees(x, position.as_dvec3()) {
+                    return 0.0;
+                }
+                let cone = match &self.lights[k] {
+                    Light::Spot { direction, cos_inner, cos_outer, .. } => {
+                        spot_falloff(*direction, *cos_inner, *cos_outer, (-to_light / r2.sqrt()).as_vec3()) as f64
+                    }
+                    _ => 1.0,
+                };
+                self.weights[k] * cone * cos / r2
+            }
+        }
+    }
+
+    /// Whether nothing lies on the segment from `x` to `light` (a shadow ray; hits within
+    /// 10⁻⁴ of either end do not count, as for the workers' shadow rays).
+    fn sees(&self, x: DVec3, light: DVec3) -> bool {
+        (0..self.bvhs.len()).all(|o| {
+            let to = &self.to_object[o];
+            let (p, q) = (to.transform_point3(x), to.transform_point3(light));
+            let (po, d) = (p.as_vec3(), (q - p).as_vec3());
+            self.bvhs[o].visit(
+                |lo, hi| segment_meets(p, q, lo, hi),
+                |f: &Face| !ray_triangle(po, d, f.v[0], f.v[1], f.v[2]).is_some_and(|t| t > 1e-4 && t < 1.0 - 1e-4),
+            )
+        })
+    }
+
+    /// The unit normal (world space) of the face of `object` nearest `p`, when one lies
+    /// within 10⁻⁴ of the object's size (a shadow edge lies on its receiver's faces).
+    pub fn receiver_normal(&self, object: u32, p: DVec3) -> Option<DVec3> {
+        let o = object as usize;
+        let bvh = self.bvhs.get(o)?;
+        let root = bvh.root.as_ref()?;
+        let size = (Vec3::from(root.hi) - Vec3::from(root.lo)).length() as f64;
+        let r = 1e-4 * size.max(1e-9);
+        let q = self.to_object[o].transform_point3(p);
+        let mut best: Option<(f64, Vec3)> = None;
+        bvh.visit(
+            |lo, hi| (lo.as_dvec3() - r).cmple(q).all() && q.cmple(hi.as_dvec3() + r).all(),
+            |f: &Face| {
+                if f.n != Vec3::ZERO {
+                    let c = edgepoint_scene::geometry::closest_on_triangle(q.as_vec3(), f.v[0], f.v[1], f.v[2]);
+                    let d = (c.as_dvec3() - q).length();
+                    if d <= r && best.is_none_or(|(e, _)| d < e) {
+                        best = Some((d, f.n));
+                    }
+                }
+                true
+            },
+        );
+        // Normals go to world space by the inverse transpose of the object's matrix.
+        best.and_then(|(_, n)| (self.to_object[o].matrix3.transpose() * n.as_dvec3()).try_normalize())
+    }
+
+    /// Half the band across an edge at `m` (receiver normal `n`) of light `k` cast by the
+    /// blocker segment `s0`–`s1` (one point for an EV event): the width of the penumbra
+    /// there — the light's diameter seen through the blocker point, stretched by the
+    /// receiver's slant — and at least [`POINT_BAND`] of the distance to the light.
+    pub fn half_width(&self, k: usize, m: DVec3, n: DVec3, s0: DVec3, s1: DVec3) -> f64 {
+        let light = &self.lights[k];
+        let c = light.center().as_dvec3();
+        let dist = (m - c).length();
+        let diameter = match light {
+            Light::Area { vertices, .. } => vertices
+                .iter()
+                .flat_map(|a| vertices.iter().map(move |b| (*a - *b).length() as f64))
+                .fold(0.0, f64::max),
+            _ => 0.0,
+        };
+        let d = s1 - s0;
+        let u = if d.length_squared() > 0.0 { ((m - s0).dot(d) / d.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+        let s = s0 + d * u;
+        let penumbra = diameter * (m - s).length() / (s - c).length().max(1e-12);
+        let slant = (n.dot(c - m) / dist.max(1e-12)).abs().max(0.25);
+        (penumbra / slant).max(POINT_BAND * dist)
+    }
+
+    /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1`;
+    /// `None` when no receiver face is found under it or it has no length.
+    pub fn edge_error(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3, rule: &[(f64, f64)]) -> Option<f64> {
+        let (a, b) = (e.a.as_dvec3(), e.b.as_dvec3());
+        let m = 0.5 * (a + b);
+        let mut n = self.receiver_normal(e.object, m)?;
+        // The receiver's side the edge's light shines on.
+        if n.dot(self.lights[k].center().as_dvec3() - m) < 0.0 {
+            n = -n;
+        }
+        let band = Band::new(a, b, n, self.half_width(k, m, n, s0, s1))?;
+        Some(washout_error(&band, k, self.lights.len(), rule, |j, x, n| self.irradiance(j, x, n)))
+    }
+}
+
+/// The inward planes (normal, point) of the pyramid from `apex` over the convex `base`, and
+/// the base's own plane.
+fn pyramid_planes(apex: DVec3, base: &[DVec3]) -> Vec<(DVec3, DVec3)> {
+    let k = base.len();
+    let inside = (apex + base.iter().copied().sum::<DVec3>() / k.max(1) as f64) * 0.5;
+    let mut out: Vec<(DVec3, DVec3)> = (0..k)
+        .map(|i| {
+            let m = (base[i] - apex).cross(base[(i + 1) % k] - apex);
+            (if m.dot(inside - apex) >= 0.0 { m } else { -m }, apex)
+        })
+        .collect();
+    if k >= 3 {
+        let m = (base[1] - base[0]).cross(base[2] - base[0]);
+        out.push((if m.dot(inside - base[0]) >= 0.0 { m } else { -m }, base[0]));
+    }
+    out
+}
+
+type EdgeKey = (u32, u32, u8, [u32; 6]);
+
+fn key(light: u32, e: &EdgeSegment) -> EdgeKey {
+    let [a, b] = [e.a, e.b].map(|p| p.to_array().map(f32::to_bits));
+    (light, e.object, e.kind as u8, [a[0], a[1], a[2], b[0], b[1], b[2]])
+}
+
+/// The estimate of every stored shadow edge, kept from update to update: an edge already
+/// estimated under the same lights and transforms is not estimated again (a move anywhere
+/// can change any band's irradiance, so a move forgets them all).
+#[derive(Default)]
+pub struct EdgeErrors {
+    lights: Vec<Light>,
+    transforms: Vec<Affine3A>,
+    known: HashMap<EdgeKey, f64>,
+    rule: Vec<(f64, f64)>,
+}
+
+impl EdgeErrors {
+    pub fn new() -> EdgeErrors {
+        EdgeErrors { rule: gauss_legendre(ORDER), ..Default::default() }
+    }
+
+    /// Whether [`Self::update`] would estimate any edge of `store`.
+    pub fn missing(&self, store: &ShadowStore, lights: &[Light], transforms: &[Affine3A]) -> bool {
+        if self.lights != lights || self.transforms != transforms {
+            return store.segment_count() > 0;
+        }
+        store.events_with_edges().any(|((l, _), _, segs)| segs.iter().any(|e| !self.known.contains_key(&key(l, e))))
+    }
+
+    /// Every shadow edge of `store` with its error (infinite where none can be estimated:
+    /// such an edge always stays), in the store's order, and how many were estimated now.
+    pub fn update(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> (Vec<(EdgeSegment, f64)>, usize) {
+        if self.lights != lights || self.transforms != transforms {
+            self.known.clear();
+            self.lights = lights.to_vec();
+            self.transforms = transforms.to_vec();
+        }
+        let scene = SceneLights::new(lights, bvhs, transforms);
+        let mut todo: Vec<(EdgeSegment, u32, DVec3, DVec3)> = Vec::new();
+        let mut all = Vec::new();
+        for ((l, b), ev, segs) in store.events_with_edges() {
+            let tb = daffine(transforms.get(b as usize).unwrap_or(&Affine3A::IDENTITY));
+            let (s0, s1) = (tb.transform_point3(ev.s[0].as_dvec3()), tb.transform_point3(ev.s[1].as_dvec3()));
+            for e in segs {
+                all.push((*e, l));
+                if !self.known.contains_key(&key(l, e)) {
+                    todo.push((*e, l, s0, s1));
+                }
+            }
+        }
+        let rule = &self.rule;
+        let fresh: Vec<(EdgeKey, f64)> = todo
+            .par_iter()
+            .map(|(e, l, s0, s1)| {
+                let err = if (*l as usize) < lights.len() { scene.edge_error(e, *l as usize, *s0, *s1, rule) } else { None };
+                (key(*l, e), err.unwrap_or(f64::INFINITY))
+            })
+            .collect();
+        let estimated = fresh.len();
+        self.known.extend(fresh);
+        // Edges no longer stored are forgotten.
+        if self.known.len() > all.len() {
+            let live: std::collections::HashSet<EdgeKey> = all.iter().map(|(e, l)| key(*l, e)).collect();
+            self.known.retain(|k, _| live.contains(k));
+        }
+        let out = all.into_iter().map(|(e, l)| (e, self.known.get(&key(l, &e)).copied().unwrap_or(f64::INFINITY))).collect();
+        (out, estimated)
+    }
+}
+
+#[cfg(test)]
+mod tests;
