@@ -44,6 +44,7 @@
 
 mod clock;
 mod converge;
+mod dmesh;
 mod edges;
 mod encode;
 mod epi;
@@ -131,6 +132,9 @@ enum Cmd {
     /// The direct shader's exact area lights (area=exact) against its sampled soft shadows:
     /// samples/s on one thread and the sampled images' noise against the exact one.
     ExactArea(exact_area::ExactAreaArgs),
+    /// The discontinuity mesh of the scene's area lights (paper 002): full computation
+    /// time, segments and faces, memory of the grid and the mesh.
+    Dmesh(dmesh::DmeshArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -155,6 +159,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Split(a) => split::run(a),
         Cmd::Speedup(a) => speedup::run(a),
         Cmd::ExactArea(a) => exact_area::run(a),
+        Cmd::Dmesh(a) => dmesh::run(a),
     }
 }
 
