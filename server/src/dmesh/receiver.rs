@@ -61,15 +61,28 @@ impl Receiver {
     /// The part of segment `a b` inside the triangle (Liang–Barsky against its three
     /// sides), as parameters along it.
     pub fn clip_segment(&self, a: DVec2, b: DVec2) -> Option<(f64, f64)> {
-        let mut t = (0.0f64, 1.0f64);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        let d = b - a;
         for k in 0..3 {
             let (p, q) = (self.corners[k], self.corners[(k + 1) % 3]);
             let e = q - p;
-            // Inside: e × (x − p) ≥ −tol |e| for a counter-clockwise triangle.
-            let slack = self.tol * e.length();
-            t = super::segments::keep_positive(t, e.perp_dot(a - p) + slack, e.perp_dot(b - p) + slack)?;
+            // Inside: e × (x − p) ≥ 0 for a counter-clockwise triangle.
+            let fa = e.perp_dot(a - p);
+            let fd = e.perp_dot(d);
+            if fd.abs() < 1e-300 {
+                if fa < -self.tol * e.length() {
+                    return None;
+                }
+                continue;
+            }
+            let t = -fa / fd;
+            if fd > 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
         }
-        Some(t)
+        (t1 - t0 > 0.0).then_some((t0, t1))
     }
 
     /// Whether `q` lies inside the triangle (closed).

@@ -62,7 +62,7 @@ pub struct Trace {
 }
 
 /// Keeps the part of `[t0, t1]` where the affine `f(t) = f0 + t (f1 − f0)` is positive.
-pub fn keep_positive(t: (f64, f64), f0: f64, f1: f64) -> Option<(f64, f64)> {
+fn keep_positive(t: (f64, f64), f0: f64, f1: f64) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = t;
     let d = f1 - f0;
     if d.abs() < 1e-300 {
