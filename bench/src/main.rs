@@ -46,6 +46,7 @@
 
 mod clock;
 mod converge;
+mod dmesh;
 mod edges;
 mod encode;
 mod epi;
@@ -138,6 +139,9 @@ enum Cmd {
     /// other lights do not wash out below --tolerance: shadow edges, samples per frame, PSNR.
     #[command(after_help = edgepoint_proto::shaders::help_text())]
     Simplify(simplify::SimplifyArgs),
+    /// The discontinuity mesh of the scene's area lights (paper 002): full computation
+    /// time, segments and faces, memory of the grid and the mesh.
+    Dmesh(dmesh::DmeshArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -163,6 +167,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Speedup(a) => speedup::run(a),
         Cmd::ExactArea(a) => exact_area::run(a),
         Cmd::Simplify(a) => simplify::run(a),
+        Cmd::Dmesh(a) => dmesh::run(a),
     }
 }
 

@@ -25,6 +25,7 @@
 
 pub mod cli;
 pub mod background;
+pub mod dmesh;
 pub mod edges;
 pub mod encode;
 pub mod epi;

@@ -1,0 +1,182 @@
+//! `edgepoint-bench dmesh`: the discontinuity mesh of a scene's area lights (paper 002,
+//! issue 15 items 1 and 6): the time of a full computation (uniform grid, then every light
+//! on every receiver triangle: segments, arrangement, face backprojections), the counts of
+//! segments, faces and receivers, and the memory of the grid and the mesh; then `--moves`
+//! random rigid moves of one object, each applied incrementally (§3–4) and recomputed in
+//! full: the time of each, their ratio (`incremental_speedup`) and the receivers where the
+//! two differ (`mismatches`, which must be 0).
+use anyhow::Result;
+use edgepoint_server::dmesh::geometry::Geometry;
+use edgepoint_server::dmesh::grid::Grid;
+use edgepoint_server::dmesh::update::mismatches;
+use edgepoint_server::dmesh::{area_lights, point_lights_as_squares, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
+use edgepoint_server::rng::Rng;
+use edgepoint_server::reference::LogProgress;
+use serde_json::json;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct DmeshArgs {
+    /// A built-in scene name (cornell, chains, rooms, grid-dragon, …) or a scene file.
+    #[arg(long, default_value = "cornell")]
+    pub scene: String,
+    /// Shared data directory for built-ins made from data (grid-dragon).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
+    /// Full computations to time (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Side of the square area lights standing in for point and spot lights, as a fraction of
+    /// the scene's diagonal (scenes lit only by points, as chains and grid-dragon, have no
+    /// mesh otherwise); 0 keeps only the scene's own area lights.
+    #[arg(long, default_value_t = 0.05)]
+    pub point_light_size: f64,
+    /// Random moves of `--object` to time incrementally against a full recomputation.
+    #[arg(long, default_value_t = 5)]
+    pub moves: usize,
+    /// The object to move (default: the smallest object of at least 8 triangles).
+    #[arg(long)]
+    pub object: Option<String>,
+    /// Largest translation per axis of a move, as a fraction of the object's diagonal
+    /// (rotations are up to 0.2 rad about a random axis through its centre).
+    #[arg(long, default_value_t = 0.1)]
+    pub step: f64,
+    /// Seed of the random moves.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: DmeshArgs) -> Result<()> {
+    let progress = LogProgress::new("dmesh");
+    let p = std::path::Path::new(&a.scene);
+    let scene = if p.extension().is_some() && p.is_file() {
+        edgepoint_scene::load::load_path(p, &progress).map_err(|e| anyhow::anyhow!("{e}"))?
+    } else {
+        edgepoint_scene::data::load_builtin(&a.scene, a.data_dir.as_deref(), &progress).map_err(anyhow::Error::msg)?
+    };
+    scene.validate().map_err(anyhow::Error::msg)?;
+    let mut lights = area_lights(&scene);
+    let (lo, hi) = scene.bounds();
+    let diagonal = (hi - lo).length() as f64;
+    let from_points = a.point_light_size > 0.0;
+    if from_points {
+        lights.extend(point_lights_as_squares(&scene, a.point_light_size * diagonal));
+    }
+    if lights.is_empty() {
+        anyhow::bail!("{} has no area light (and --point-light-size 0 adds none)", a.scene);
+    }
+    let g = Geometry::from_scene(&scene);
+    let (mut times, mut grid_ms) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for _ in 0..a.repeat.max(1) {
+        let t = Instant::now();
+        let grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
+        grid_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let mesh = DiscontinuityMesh::compute(&g, &grid, &lights);
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        last = Some((grid, mesh));
+    }
+    let (mut grid, mut mesh) = last.expect("one run");
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (full_ms, grid_ms) = (median(&mut times), median(&mut grid_ms));
+    let receivers = mesh.receivers().count();
+    let with_segments = mesh.receivers().filter(|m| !m.segments.is_empty()).count();
+    let (segments, faces) = (mesh.segment_count(), mesh.face_count());
+    let (mesh_bytes, grid_bytes, geometry_bytes) = (mesh.bytes(), grid.bytes(), g.bytes());
+    let threads = rayon::current_num_threads();
+    // The moved object.
+    let object = match &a.object {
+        Some(name) => scene.object_id(name).ok_or_else(|| anyhow::anyhow!("{} has no object {name}", a.scene))?,
+        None => (0..scene.objects.len())
+            .filter(|i| scene.objects[*i].mesh.triangles.len() >= 8)
+            .min_by(|i, j| {
+                let d = |k: usize| {
+                    let (lo, hi) = scene.object_bounds(k);
+                    (hi - lo).length()
+                };
+                d(*i).total_cmp(&d(*j))
+            })
+            .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", a.scene))? as u32,
+    };
+    let intersection_bytes: usize = mesh.receivers().map(|m| m.traces.iter().map(|t| t.bytes()).sum::<usize>()).sum();
+    let mut rng = Rng::new(a.seed);
+    let mut g = g;
+    let (mut incr_ms, mut full_after_ms, mut bad, mut moves) = (Vec::new(), Vec::new(), 0usize, Vec::new());
+    for _ in 0..a.moves {
+        let vs = g.object_vertices(object);
+        let (olo, ohi) = vs.clone().fold((glam::DVec3::splat(f64::INFINITY), glam::DVec3::splat(f64::NEG_INFINITY)), |(l, h), v| (l.min(g.pos[v as usize]), h.max(g.pos[v as usize])));
+        let c = (olo + ohi) * 0.5;
+        let step = a.step * (ohi - olo).length();
+        let axis = glam::DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5).normalize_or(glam::DVec3::Y);
+        let rot = glam::DQuat::from_axis_angle(axis, (rng.f64() - 0.5) * 0.4);
+        let d = glam::DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 2.0 * step;
+        let new = g.moved(object, |p| c + d + rot * (p - c));
+        let t = Instant::now();
+        let stats = mesh.move_object(&g, &new, &mut grid, object);
+        let ti = t.elapsed().as_secs_f64() * 1e3;
+        g = new;
+        let t = Instant::now();
+        let full = DiscontinuityMesh::compute(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights);
+        let tf = t.elapsed().as_secs_f64() * 1e3;
+        let m = mismatches(&mesh, &full);
+        bad += m;
+        incr_ms.push(ti);
+        full_after_ms.push(tf);
+        moves.push(json!({
+            "incremental_ms": ti, "full_ms": tf, "speedup": tf / ti, "mismatches": m,
+            "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
+            "receivers_recomputed": stats.receivers_recomputed, "traces_reintersected": stats.traces_reintersected,
+            "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
+        }));
+    }
+    let (si, sf) = (incr_ms.iter().sum::<f64>(), full_after_ms.iter().sum::<f64>());
+    let speedup = if a.moves > 0 { Some(sf / si) } else { None };
+    let table = format!(
+        "{}: {} triangles, {} area lights, {threads} threads\nfull computation {full_ms:.1} ms (grid {grid_ms:.1} ms)\nreceivers lit {receivers}, with segments {with_segments}\nsegments {segments}, faces {faces}\nmemory: mesh {:.2} MB (intersection lists {:.2} MB), grid {:.2} MB, geometry {:.2} MB\nmoved {} ({} moves): incremental {:.2} ms, full {:.1} ms per move, speedup {:.1}×, mismatches {bad}\n",
+        a.scene,
+        g.tris.len(),
+        lights.len(),
+        mesh_bytes as f64 / 1e6,
+        intersection_bytes as f64 / 1e6,
+        grid_bytes as f64 / 1e6,
+        geometry_bytes as f64 / 1e6,
+        scene.objects[object as usize].name,
+        a.moves,
+        si / a.moves.max(1) as f64,
+        sf / a.moves.max(1) as f64,
+        speedup.unwrap_or(f64::NAN)
+    );
+    let mut out = json!({
+        "scene": a.scene,
+        "triangles": g.tris.len(),
+        "area_lights": lights.len(),
+        "threads": threads,
+        "full_ms": full_ms,
+        "grid_ms": grid_ms,
+        "receivers": receivers,
+        "receivers_with_segments": with_segments,
+        "segments": segments,
+        "faces": faces,
+        "mesh_bytes": mesh_bytes,
+        "grid_bytes": grid_bytes,
+        "geometry_bytes": geometry_bytes,
+        "intersection_list_bytes": intersection_bytes,
+        "point_lights_as_squares": from_points,
+        "moved_object": scene.objects[object as usize].name,
+        "moved_object_triangles": scene.objects[object as usize].mesh.triangles.len(),
+        "moves": moves,
+    });
+    if let Some(s) = speedup {
+        out["incremental_speedup"] = json!(s);
+        out["mismatches"] = json!(bad);
+    }
+    crate::emit(a.json, &out, &table);
+    Ok(())
+}

@@ -1,0 +1,132 @@
+//! The scene as the discontinuity mesh sees it (paper 002 §2: the "polygons of the
+//! environment" whose edges and vertices generate discontinuity surfaces): world-space
+//! triangles in f64 with welded vertex ids, and the adjacency the generators need — the
+//! triangles around each edge (is it a silhouette from a light vertex?) and the neighbours
+//! of each vertex (is a plane through it tangent to its object?).
+use edgepoint_scene::Scene;
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// An undirected edge by its two vertex ids, smaller first.
+pub type EdgeKey = (u32, u32);
+
+pub fn edge_key(a: u32, b: u32) -> EdgeKey {
+    if a < b {
+        (a, b)
+    } else {
+        (b, a)
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Geometry {
+    /// World-space vertex positions; ids are global over all objects.
+    pub pos: Vec<DVec3>,
+    /// Triangles as vertex ids.
+    pub tris: Vec<[u32; 3]>,
+    /// The object each triangle belongs to.
+    pub object: Vec<u32>,
+    /// The first vertex id and the first triangle id of each object (so a moved object's
+    /// vertices and triangles are contiguous ranges).
+    pub vertex_start: Vec<u32>,
+    pub tri_start: Vec<u32>,
+    /// Triangles around each edge.
+    pub edge_tris: HashMap<EdgeKey, Vec<u32>>,
+    /// Neighbour vertices of each vertex (over its triangles), sorted, no repeats.
+    pub neighbours: Vec<Vec<u32>>,
+}
+
+impl Geometry {
+    /// The scene's objects at their default transforms.
+    pub fn from_scene(scene: &Scene) -> Geometry {
+        let mut pos = Vec::new();
+        let mut tris = Vec::new();
+        let mut object = Vec::new();
+        let (mut vertex_start, mut tri_start) = (Vec::new(), Vec::new());
+        for (oi, o) in scene.objects.iter().enumerate() {
+            let base = pos.len() as u32;
+            vertex_start.push(base);
+            tri_start.push(tris.len() as u32);
+            pos.extend(o.mesh.positions.iter().map(|p| o.transform.transform_point3(*p).as_dvec3()));
+            for t in &o.mesh.triangles {
+                tris.push([t[0] + base, t[1] + base, t[2] + base]);
+                object.push(oi as u32);
+            }
+        }
+        Geometry::from_parts(pos, tris, object, vertex_start, tri_start)
+    }
+
+    /// A triangle soup given per object (tests, and objects moved by [`Geometry::moved`]).
+    pub fn from_objects(objects: &[(Vec<DVec3>, Vec<[u32; 3]>)]) -> Geometry {
+        let mut pos = Vec::new();
+        let mut tris = Vec::new();
+        let mut object = Vec::new();
+        let (mut vertex_start, mut tri_start) = (Vec::new(), Vec::new());
+        for (oi, (p, t)) in objects.iter().enumerate() {
+            let base = pos.len() as u32;
+            vertex_start.push(base);
+            tri_start.push(tris.len() as u32);
+            pos.extend_from_slice(p);
+            tris.extend(t.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+            object.extend(std::iter::repeat_n(oi as u32, t.len()));
+        }
+        Geometry::from_parts(pos, tris, object, vertex_start, tri_start)
+    }
+
+    fn from_parts(pos: Vec<DVec3>, tris: Vec<[u32; 3]>, object: Vec<u32>, vertex_start: Vec<u32>, tri_start: Vec<u32>) -> Geometry {
+        let mut edge_tris: HashMap<EdgeKey, Vec<u32>> = HashMap::with_capacity(tris.len() * 3 / 2);
+        let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); pos.len()];
+        for (ti, t) in tris.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                edge_tris.entry(edge_key(a, b)).or_default().push(ti as u32);
+                neighbours[a as usize].push(b);
+                neighbours[b as usize].push(a);
+            }
+        }
+        for n in &mut neighbours {
+            n.sort_unstable();
+            n.dedup();
+        }
+        Geometry { pos, tris, object, vertex_start, tri_start, edge_tris, neighbours }
+    }
+
+    /// The corners of triangle `t`.
+    #[inline]
+    pub fn tri(&self, t: u32) -> [DVec3; 3] {
+        let v = self.tris[t as usize];
+        [self.pos[v[0] as usize], self.pos[v[1] as usize], self.pos[v[2] as usize]]
+    }
+
+    /// The vertex range of object `o`.
+    pub fn object_vertices(&self, o: u32) -> std::ops::Range<u32> {
+        let end = self.vertex_start.get(o as usize + 1).copied().unwrap_or(self.pos.len() as u32);
+        self.vertex_start[o as usize]..end
+    }
+
+    /// The triangle range of object `o`.
+    pub fn object_tris(&self, o: u32) -> std::ops::Range<u32> {
+        let end = self.tri_start.get(o as usize + 1).copied().unwrap_or(self.tris.len() as u32);
+        self.tri_start[o as usize]..end
+    }
+
+    /// The same scene with object `o`'s vertices mapped by `f` (ids, triangles and adjacency
+    /// unchanged: a rigid move keeps the topology).
+    pub fn moved(&self, o: u32, f: impl Fn(DVec3) -> DVec3) -> Geometry {
+        let mut g = self.clone();
+        for v in self.object_vertices(o) {
+            g.pos[v as usize] = f(self.pos[v as usize]);
+        }
+        g
+    }
+
+    /// Axis-aligned bounds of the whole scene.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        self.pos.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+    }
+
+    /// Bytes held by the geometry and its adjacency (for the benchmark's memory figure).
+    pub fn bytes(&self) -> usize {
+        self.pos.len() * 24 + self.tris.len() * 16 + self.edge_tris.len() * 48 + self.neighbours.iter().map(|n| 24 + n.len() * 4).sum::<usize>()
+    }
+}

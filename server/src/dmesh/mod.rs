@@ -1,0 +1,214 @@
+//! The discontinuity mesh of area lights on receiver faces (paper 002, Loscos and
+//! Drettakis 1997, §2 and §4; the complete mesh with backprojections of Drettakis and Fiume
+//! that it keeps up to date).
+//!
+//! Per area light and receiver triangle: the visible discontinuity segments of the EV
+//! surfaces with the vertex or the edge on the light ([`segments`]), their planar
+//! arrangement as a half-edge structure with faces ([`arrangement`]), and each face's
+//! backprojection ([`face`]). The scene's triangles are listed in a uniform grid
+//! ([`grid`]) that finds each receiver's shaft blockers ([`receiver`]).
+//!
+//! An algorithm module: plain geometry, no session, no network.
+use edgepoint_scene::backprojection::LightPlane;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+pub mod arrangement;
+pub mod face;
+pub mod geometry;
+pub mod grid;
+pub mod receiver;
+pub mod segments;
+pub mod update;
+
+use arrangement::Arrangement;
+use face::FaceBackprojection;
+use geometry::Geometry;
+use grid::Grid;
+use receiver::{LightAbove, Receiver, Shaft};
+use segments::{Segment, TraceVis};
+
+/// Triangles per voxel the grid aims at.
+pub const GRID_TRIANGLES_PER_VOXEL: f64 = 4.0;
+
+/// The mesh of one light on one receiver triangle.
+#[derive(Debug, Clone)]
+pub struct ReceiverMesh {
+    pub receiver: Receiver,
+    /// The shaft from the light (above the receiver's plane) to the receiver: every blocker
+    /// and every discontinuity surface of the receiver lies in it.
+    pub shaft: Shaft,
+    /// Every triangle that can hide part of the light from some point of the receiver.
+    pub blockers: Vec<u32>,
+    /// The surfaces' traces with their intersection lists.
+    pub traces: Vec<TraceVis>,
+    /// The visible segments (the traces after 1D visibility).
+    pub segments: Vec<Segment>,
+    pub arrangement: Arrangement,
+    /// One per bounded face of the arrangement.
+    pub faces: Vec<FaceBackprojection>,
+}
+
+impl ReceiverMesh {
+    /// The mesh of `light` on triangle `tri`; `None` when no part of the light is above the
+    /// triangle's plane (it receives nothing) or the triangle is degenerate.
+    pub fn compute(g: &Geometry, grid: &Grid, light: &LightPlane, tri: u32, tol: f64, scratch: &mut Scratch) -> Option<ReceiverMesh> {
+        let (receiver, above, shaft) = frame(g, light, tri, tol)?;
+        let mut blockers = Vec::new();
+        receiver::shaft_blockers(g, grid, light, &receiver, &shaft, &mut blockers, &mut scratch.stamp, &mut scratch.epoch);
+        blockers.sort_unstable();
+        let traces = segments::receiver_traces(g, light, &above, &receiver, &blockers);
+        Some(ReceiverMesh::assemble(g, light, receiver, shaft, blockers, traces, |_, _| None))
+    }
+
+    /// The segments, arrangement and face backprojections from the traces; `reuse` may give
+    /// a face's backprojection from before a move (by its interior point and area).
+    pub fn assemble(
+        g: &Geometry,
+        light: &LightPlane,
+        receiver: Receiver,
+        shaft: Shaft,
+        blockers: Vec<u32>,
+        traces: Vec<TraceVis>,
+        mut reuse: impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
+    ) -> ReceiverMesh {
+        let mut segments = Vec::new();
+        for t in &traces {
+            t.visible(&receiver, &mut segments);
+        }
+        let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
+        let faces = (0..arrangement.faces.len())
+            .map(|f| {
+                let point = arrangement.interior_point(f);
+                reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| FaceBackprojection::compute(g, light, &receiver, &blockers, point))
+            })
+            .collect();
+        ReceiverMesh { receiver, shaft, blockers, traces, segments, arrangement, faces }
+    }
+
+    /// Irradiance per unit radiance at receiver point `q` (receiver frame), from the
+    /// backprojection of the face holding it.
+    pub fn irradiance(&self, g: &Geometry, light: &LightPlane, q: DVec2) -> f64 {
+        let mut hit = Vec::new();
+        face::visible_at(g, light, &self.receiver, &self.blockers, q, &mut hit).map_or(0.0, |v| v.irradiance())
+    }
+
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<ReceiverMesh>()
+            + self.blockers.len() * 4
+            + self.traces.iter().map(|t| t.bytes()).sum::<usize>()
+            + self.segments.len() * std::mem::size_of::<Segment>()
+            + self.arrangement.bytes()
+            + self.faces.iter().map(|f| f.bytes()).sum::<usize>()
+    }
+}
+
+/// The receiver's frame, the light above its plane and the shaft.
+pub fn frame(g: &Geometry, light: &LightPlane, tri: u32, tol: f64) -> Option<(Receiver, LightAbove, Shaft)> {
+    let centre = light.corners.iter().map(|q| light.lift(*q)).sum::<DVec3>() / light.corners.len() as f64;
+    let receiver = Receiver::new(g, tri, centre, tol)?;
+    let above = LightAbove::new(light, &receiver)?;
+    let [a, b, c] = g.tri(tri);
+    // Wholly behind the (one-sided) light: nothing reaches it.
+    if [a, b, c].iter().all(|p| light.height(*p) <= tol) {
+        return None;
+    }
+    let shaft = Shaft::new(&above.clipped, &[a, b, c], tol);
+    Some((receiver, above, shaft))
+}
+
+/// Per-thread scratch of the grid queries.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    stamp: Vec<u32>,
+    epoch: u32,
+}
+
+/// The whole mesh: per light, the receivers it reaches.
+#[derive(Debug, Clone)]
+pub struct DiscontinuityMesh {
+    pub lights: Vec<LightPlane>,
+    /// `meshes[l][t]`: the mesh of light `l` on triangle `t`, if the light reaches it.
+    pub meshes: Vec<Vec<Option<Box<ReceiverMesh>>>>,
+    pub tol: f64,
+}
+
+/// The area lights of a scene as light planes (point and spot lights have no mesh).
+pub fn area_lights(scene: &edgepoint_scene::Scene) -> Vec<LightPlane> {
+    scene
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            edgepoint_scene::Light::Area { vertices, .. } => LightPlane::new(vertices),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Square area lights of side `side` standing in for a scene's point and spot lights (the
+/// benchmark's stand-ins for scenes lit only by points: `chains`, `grid-dragon`), each
+/// centred on the point and facing the centre of the scene's bounds.
+pub fn point_lights_as_squares(scene: &edgepoint_scene::Scene, side: f64) -> Vec<LightPlane> {
+    let (lo, hi) = scene.bounds();
+    let centre = ((lo + hi) * 0.5).as_dvec3();
+    scene
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            edgepoint_scene::Light::Point { position, .. } | edgepoint_scene::Light::Spot { position, .. } => {
+                let p = position.as_dvec3();
+                let n = (centre - p).try_normalize()?;
+                let u = n.any_orthonormal_vector() * (0.5 * side);
+                let w = n.cross(u);
+                // Counter-clockwise about n (u × w = n): the light emits toward the centre.
+                let corners = [p - u - w, p + u - w, p + u + w, p - u + w].map(|c| c.as_vec3());
+                LightPlane::new(&corners)
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// The mesh's length tolerance for a scene: [`receiver::EPS`] of its size.
+pub fn tolerance(g: &Geometry) -> f64 {
+    let (lo, hi) = g.bounds();
+    receiver::EPS * (hi - lo).length().max(1e-30)
+}
+
+impl DiscontinuityMesh {
+    /// The full computation over every light and every triangle, in parallel over
+    /// receivers.
+    pub fn compute(g: &Geometry, grid: &Grid, lights: &[LightPlane]) -> DiscontinuityMesh {
+        let tol = tolerance(g);
+        let meshes = lights
+            .iter()
+            .map(|light| {
+                (0..g.tris.len() as u32)
+                    .into_par_iter()
+                    .map_init(Scratch::default, |s, t| ReceiverMesh::compute(g, grid, light, t, tol, s).map(Box::new))
+                    .collect()
+            })
+            .collect();
+        DiscontinuityMesh { lights: lights.to_vec(), meshes, tol }
+    }
+
+    /// Every receiver mesh of every light.
+    pub fn receivers(&self) -> impl Iterator<Item = &ReceiverMesh> {
+        self.meshes.iter().flatten().flatten().map(|m| &**m)
+    }
+
+    pub fn segment_count(&self) -> usize {
+        self.receivers().map(|m| m.segments.len()).sum()
+    }
+
+    pub fn face_count(&self) -> usize {
+        self.receivers().map(|m| m.faces.len()).sum()
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.receivers().map(|m| m.bytes()).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,397 @@
+//! Discontinuity segments on one receiver face from one area light (paper 002 §2, after
+//! Drettakis and Fiume's complete discontinuity mesh): the traces of the EV surfaces with
+//! the vertex or the edge on the light,
+//!
+//! - **VE** — light corner `v` × blocker edge `ab`: the fan of rays from `v` through `ab`,
+//!   beyond it; a discontinuity where `ab` is a silhouette seen from `v` (the triangles at
+//!   `ab` all lie on one side of the plane `v a b`), because there `v` appears or vanishes
+//!   behind the blocker;
+//! - **EV** — light edge `l` × blocker vertex `w`: the rays from points of `l` through `w`,
+//!   beyond it; a discontinuity for the points of `l` from which `w` is on its object's
+//!   outline (one of its edges a silhouette), because there `w`'s shadow crosses `l`;
+//!
+//! each clipped to the receiver triangle and then by **1D visibility** (paper 002 §3.3:
+//! the surface's intersections sorted along it): a point of a trace is kept only if its
+//! generating line, from the receiver through the blocker to the light, meets no other
+//! triangle. The occluders of one surface are found in its fan triangle(s) and projected
+//! from the fan's apex onto the trace, which is an interval computation.
+use super::geometry::{edge_key, EdgeKey, Geometry};
+use super::receiver::{LightAbove, Receiver};
+use edgepoint_scene::backprojection::{LightPlane, LIGHT_GAP};
+use glam::{DVec2, DVec3};
+
+/// What generates a segment. Vertex ids are [`Geometry`] ids; light corners and edges are
+/// indices into the light's corners (edge `i` runs from corner `i` to `i + 1`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Generator {
+    Ve { light_vertex: u32, edge: EdgeKey },
+    Ev { light_edge: u32, vertex: u32 },
+}
+
+impl Generator {
+    /// Whether the generator involves vertex `v` of the scene.
+    pub fn uses_vertex(&self, v: u32) -> bool {
+        match *self {
+            Generator::Ve { edge, .. } => edge.0 == v || edge.1 == v,
+            Generator::Ev { vertex, .. } => vertex == v,
+        }
+    }
+}
+
+/// A visible discontinuity segment in the receiver's 2D frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    pub generator: Generator,
+    pub a: DVec2,
+    pub b: DVec2,
+}
+
+/// A surface's trace on the receiver before visibility: the segment and the fan of
+/// generating lines (apex and, for EV, the light-side triangle too).
+#[derive(Debug, Clone, Copy)]
+pub struct Trace {
+    pub generator: Generator,
+    /// 2D ends on the receiver.
+    pub a: DVec2,
+    pub b: DVec2,
+    /// The fan's apex: the light corner (VE) or the blocker vertex (EV).
+    pub apex: DVec3,
+    /// EV: the light-edge points of the lines through `a` and `b` (pulled back by
+    /// `LIGHT_GAP` so that the light's own fixture does not hide them).
+    pub light_side: Option<(DVec3, DVec3)>,
+}
+
+/// Keeps the part of `[t0, t1]` where the affine `f(t) = f0 + t (f1 − f0)` is positive.
+fn keep_positive(t: (f64, f64), f0: f64, f1: f64) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = t;
+    let d = f1 - f0;
+    if d.abs() < 1e-300 {
+        return (f0 > 0.0).then_some((t0, t1));
+    }
+    let z = -f0 / d;
+    if d > 0.0 {
+        t0 = t0.max(z);
+    } else {
+        t1 = t1.min(z);
+    }
+    (t1 > t0).then_some((t0, t1))
+}
+
+/// Whether the points `others` lie on one side of the plane through `p` with normal `m`
+/// (points within `tol` of it count for either side).
+fn one_side(p: DVec3, m: DVec3, others: impl Iterator<Item = DVec3>, tol: f64) -> bool {
+    let m = match m.try_normalize() {
+        Some(m) => m,
+        None => return false,
+    };
+    let (mut pos, mut neg) = (false, false);
+    for c in others {
+        let d = m.dot(c - p);
+        pos |= d > tol;
+        neg |= d < -tol;
+    }
+    !(pos && neg)
+}
+
+/// The VE trace of light corner `v` and blocker edge `(ia, ib)`, or `None` when the edge is
+/// no silhouette from `v` or its shadow misses the receiver.
+pub fn ve_trace(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, v: DVec3, edge: EdgeKey) -> Option<Trace> {
+    let (a, b) = (g.pos[edge.0 as usize], g.pos[edge.1 as usize]);
+    let hv = r.height(v);
+    let (ha, hb) = (r.height(a), r.height(b));
+    // Between the receiver's plane and the light corner's height, and in front of the light.
+    let t = keep_positive((0.0, 1.0), ha - r.tol, hb - r.tol)?;
+    let t = keep_positive(t, hv - ha - r.tol, hv - hb - r.tol)?;
+    let t = keep_positive(t, light.height(a), light.height(b))?;
+    let map = |t: f64| {
+        let x = a + (b - a) * t;
+        r.to2(v + (x - v) * (hv / (hv - r.height(x))))
+    };
+    let (p0, p1) = (map(t.0), map(t.1));
+    let (s0, s1) = r.clip_segment(p0, p1)?;
+    let (pa, pb) = (p0.lerp(p1, s0), p0.lerp(p1, s1));
+    if pa.distance(pb) <= r.tol {
+        return None;
+    }
+    // The silhouette test last: most edges' shadows miss a given receiver.
+    let m = (a - v).cross(b - v);
+    let tris = g.edge_tris.get(&edge)?;
+    let third = tris.iter().flat_map(|t| g.tris[*t as usize]).filter(|x| *x != edge.0 && *x != edge.1).map(|x| g.pos[x as usize]);
+    if !one_side(v, m, third, r.tol) {
+        return None;
+    }
+    Some(Trace { generator: Generator::Ve { light_vertex: li, edge }, a: pa, b: pb, apex: v, light_side: None })
+}
+
+/// Whether blocker vertex `w` lies on its object's outline seen from `y`: one of its edges
+/// is a silhouette from `y` (the triangles at the edge on one side of the plane through `y`
+/// and the edge) or a boundary.
+pub fn on_outline(g: &Geometry, w: u32, y: DVec3, tol: f64) -> bool {
+    let wp = g.pos[w as usize];
+    g.neighbours[w as usize].iter().any(|&x| {
+        let key = edge_key(w, x);
+        let Some(tris) = g.edge_tris.get(&key) else { return false };
+        let xp = g.pos[x as usize];
+        let third = tris.iter().flat_map(|t| g.tris[*t as usize]).filter(|c| *c != w && *c != x).map(|c| g.pos[c as usize]);
+        one_side(y, (wp - y).cross(xp - y), third, tol)
+    })
+}
+
+/// The parts of light edge `y0 y1` from which `w` is on its object's outline: the edge is
+/// cut where it crosses the planes of `w`'s triangles (only there can an edge at `w` turn
+/// into or out of a silhouette) and each piece is tested at its middle.
+pub fn outline_parts(g: &Geometry, w: u32, y0: DVec3, y1: DVec3, tol: f64, out: &mut Vec<(f64, f64)>) {
+    out.clear();
+    let mut cuts = vec![0.0, 1.0];
+    let wp = g.pos[w as usize];
+    for &x in &g.neighbours[w as usize] {
+        if let Some(tris) = g.edge_tris.get(&edge_key(w, x)) {
+            for t in tris {
+                let [a, b, c] = g.tri(*t);
+                if let Some(n) = (b - a).cross(c - a).try_normalize() {
+                    let (d0, d1) = (n.dot(y0 - wp), n.dot(y1 - wp));
+                    if (d0 > 0.0) != (d1 > 0.0) {
+                        cuts.push(d0 / (d0 - d1));
+                    }
+                }
+            }
+        }
+    }
+    cuts.sort_by(f64::total_cmp);
+    for c in cuts.windows(2) {
+        if c[1] - c[0] <= 1e-12 {
+            continue;
+        }
+        let mid = y0 + (y1 - y0) * (0.5 * (c[0] + c[1]));
+        if on_outline(g, w, mid, tol) {
+            match out.last_mut() {
+                Some(last) if (last.1 - c[0]).abs() <= 1e-12 => last.1 = c[1],
+                _ => out.push((c[0], c[1])),
+            }
+        }
+    }
+}
+
+/// The EV traces of light edge `li` (its part above the receiver, `y0 y1`) and blocker
+/// vertex `w`: one per part of the edge from which `w` is on the outline and whose shadow
+/// reaches the receiver.
+pub fn ev_traces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, (y0, y1): (DVec3, DVec3), w: u32, parts: &mut Vec<(f64, f64)>, out: &mut Vec<Trace>) {
+    let wp = g.pos[w as usize];
+    let hw = r.height(wp);
+    if hw <= r.tol || light.height(wp) <= 0.0 {
+        return;
+    }
+    // Whether the shadow of w from the whole edge reaches the receiver at all, before the
+    // outline test (most vertices' shadows miss a given receiver).
+    {
+        let Some(t) = keep_positive((0.0, 1.0), r.height(y0) - hw - r.tol, r.height(y1) - hw - r.tol) else { return };
+        let map = |t: f64| {
+            let y = y0 + (y1 - y0) * t;
+            let hy = r.height(y);
+            r.to2(y + (wp - y) * (hy / (hy - hw)))
+        };
+        if r.clip_segment(map(t.0), map(t.1)).is_none() {
+            return;
+        }
+    }
+    outline_parts(g, w, y0, y1, r.tol, parts);
+    for &part in parts.iter() {
+        let Some(t) = keep_positive(part, r.height(y0) - hw - r.tol, r.height(y1) - hw - r.tol) else { continue };
+        let map = |t: f64| {
+            let y = y0 + (y1 - y0) * t;
+            let hy = r.height(y);
+            r.to2(y + (wp - y) * (hy / (hy - hw)))
+        };
+        let (p0, p1) = (map(t.0), map(t.1));
+        let Some((s0, s1)) = r.clip_segment(p0, p1) else { continue };
+        let (pa, pb) = (p0.lerp(p1, s0), p0.lerp(p1, s1));
+        if pa.distance(pb) <= r.tol {
+            continue;
+        }
+        // The light-edge end of the line from a receiver point through w.
+        let back = |q: DVec2| {
+            let p = r.to3(q);
+            let (hp, hw) = (light.height(p), light.height(wp));
+            let y = p + (wp - p) * (hp / (hp - hw));
+            p + (y - p) * (1.0 - LIGHT_GAP)
+        };
+        out.push(Trace { generator: Generator::Ev { light_edge: li, vertex: w }, a: pa, b: pb, apex: wp, light_side: Some((back(pa), back(pb))) });
+    }
+}
+
+/// Every trace on the receiver: VE for each light corner above it and each edge of the
+/// blockers, EV for each light edge above it and each blocker vertex.
+pub fn traces(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver, blockers: &[u32], out: &mut Vec<Trace>) {
+    out.clear();
+    let mut edges: Vec<EdgeKey> = Vec::with_capacity(blockers.len() * 3);
+    let mut verts: Vec<u32> = Vec::with_capacity(blockers.len() * 3);
+    for &t in blockers {
+        let v = g.tris[t as usize];
+        for k in 0..3 {
+            edges.push(edge_key(v[k], v[(k + 1) % 3]));
+            verts.push(v[k]);
+        }
+    }
+    edges.sort_unstable();
+    edges.dedup();
+    verts.sort_unstable();
+    verts.dedup();
+    for (li, v) in above.vertices.iter().enumerate() {
+        let Some(v) = *v else { continue };
+        out.extend(edges.iter().filter_map(|e| ve_trace(g, light, r, li as u32, v, *e)));
+    }
+    let mut parts = Vec::new();
+    for (li, e) in above.edges.iter().enumerate() {
+        let Some(e) = *e else { continue };
+        for w in &verts {
+            ev_traces(g, light, r, li as u32, e, *w, &mut parts, out);
+        }
+    }
+}
+
+/// Whether triangle `t` is one of the generator's own (it touches the fan along the edge or
+/// at the vertex, which is no occlusion).
+fn is_own(g: &Geometry, gen: &Generator, t: u32) -> bool {
+    let v = g.tris[t as usize];
+    match *gen {
+        Generator::Ve { edge, .. } => v.contains(&edge.0) && v.contains(&edge.1),
+        Generator::Ev { vertex, .. } => v.contains(&vertex),
+    }
+}
+
+/// The parameters along the trace `p0 p1` (3D) hidden by triangle `tri` within the convex
+/// `region` of the fan's plane (lines through `c`), projected from `c`.
+fn hidden_in_fan(c: DVec3, region: &[DVec3], p0: DVec3, p1: DVec3, tri: &[DVec3; 3], tol: f64) -> Option<(f64, f64)> {
+    let m = (region[1] - region[0]).cross(region[2] - region[0]).try_normalize()?;
+    let d = tri.map(|x| m.dot(x - c));
+    if d.iter().all(|x| *x >= -tol) || d.iter().all(|x| *x <= tol) {
+        return None; // on one side, touching at most
+    }
+    // The segment where the triangle crosses the fan's plane.
+    let mut q = [DVec3::ZERO; 2];
+    let mut n = 0;
+    for k in 0..3 {
+        let (i, j) = (k, (k + 1) % 3);
+        if (d[i] > 0.0) != (d[j] > 0.0) && n < 2 {
+            q[n] = tri[i] + (tri[j] - tri[i]) * (d[i] / (d[i] - d[j]));
+            n += 1;
+        }
+    }
+    if n < 2 {
+        return None;
+    }
+    // Clip it to the region, side by side.
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    let k = region.len();
+    let inner = region.iter().sum::<DVec3>() / k as f64;
+    for i in 0..k {
+        let (a, b) = (region[i], region[(i + 1) % k]);
+        let side = |x: DVec3| (b - a).cross(x - a).dot(m);
+        let s = side(inner).signum();
+        (t0, t1) = keep_positive((t0, t1), side(q[0]) * s, side(q[1]) * s)?;
+    }
+    let (x0, x1) = (q[0] + (q[1] - q[0]) * t0, q[0] + (q[1] - q[0]) * t1);
+    if x0.distance(x1) <= tol {
+        return None;
+    }
+    let proj = |x: DVec3| {
+        let dx = x - c;
+        let den = (p1 - p0).cross(dx).dot(m);
+        (den.abs() > 1e-300).then(|| -(p0 - c).cross(dx).dot(m) / den)
+    };
+    let (s0, s1) = (proj(x0)?, proj(x1)?);
+    Some((s0.min(s1), s0.max(s1)))
+}
+
+/// A trace with its intersection list (paper 002 §3.3): the parameter intervals along it
+/// hidden by each blocker triangle, kept so that a move re-intersects only the moved
+/// object's triangles.
+#[derive(Debug, Clone)]
+pub struct TraceVis {
+    pub trace: Trace,
+    pub hidden: Vec<(u32, f64, f64)>,
+}
+
+/// Appends the intervals of `trace` that triangle `t` hides (none for its own triangles).
+pub fn hide(g: &Geometry, r: &Receiver, trace: &Trace, t: u32, out: &mut Vec<(u32, f64, f64)>) {
+    if is_own(g, &trace.generator, t) {
+        return;
+    }
+    let (p0, p1) = (r.to3(trace.a), r.to3(trace.b));
+    let tri = g.tri(t);
+    let c = trace.apex;
+    match trace.light_side {
+        // VE: the fan from the light corner, short of it by `LIGHT_GAP` (the light's own
+        // fixture touches it there, and the pointwise backprojection ignores it too).
+        None => {
+            let (a, b) = (c + (p0 - c) * LIGHT_GAP, c + (p1 - c) * LIGHT_GAP);
+            if let Some(h) = hidden_in_fan(c, &[a, p0, p1, b], p0, p1, &tri, r.tol) {
+                out.push((t, h.0, h.1));
+            }
+        }
+        // EV: the fan below the blocker vertex and the one above it, to the light edge.
+        Some((y0, y1)) => {
+            for region in [[c, p0, p1], [c, y0, y1]] {
+                if let Some(h) = hidden_in_fan(c, &region, p0, p1, &tri, r.tol) {
+                    out.push((t, h.0, h.1));
+                }
+            }
+        }
+    }
+}
+
+impl TraceVis {
+    /// The trace with every blocker intersected.
+    pub fn new(g: &Geometry, r: &Receiver, trace: Trace, blockers: &[u32]) -> TraceVis {
+        let mut hidden = Vec::new();
+        for &t in blockers {
+            hide(g, r, &trace, t, &mut hidden);
+        }
+        hidden.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)));
+        TraceVis { trace, hidden }
+    }
+
+    /// The visible parts (1D visibility: the complement of the hidden intervals, which are
+    /// kept sorted by start), appended to `out`.
+    pub fn visible(&self, r: &Receiver, out: &mut Vec<Segment>) {
+        let trace = &self.trace;
+        let min = r.tol / trace.a.distance(trace.b);
+        let mut at = 0.0f64;
+        let mut emit = |s0: f64, s1: f64| {
+            if s1 - s0 > min {
+                out.push(Segment { generator: trace.generator, a: trace.a.lerp(trace.b, s0), b: trace.a.lerp(trace.b, s1) });
+            }
+        };
+        for &(_, h0, h1) in &self.hidden {
+            if h0 > at {
+                emit(at, h0.min(1.0));
+            }
+            at = at.max(h1);
+            if at >= 1.0 {
+                break;
+            }
+        }
+        if at < 1.0 {
+            emit(at, 1.0);
+        }
+    }
+
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<TraceVis>() + self.hidden.len() * 24
+    }
+}
+
+/// Every trace on one receiver with its intersection list.
+pub fn receiver_traces(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver, blockers: &[u32]) -> Vec<TraceVis> {
+    let mut tr = Vec::new();
+    traces(g, light, above, r, blockers, &mut tr);
+    let mut out: Vec<TraceVis> = tr.into_iter().map(|t| TraceVis::new(g, r, t, blockers)).collect();
+    canonical_order(&mut out);
+    out
+}
+
+/// Traces in one order whatever found them (by generator, then by where they start), so an
+/// updated mesh lists its segments as a full computation does.
+pub fn canonical_order(traces: &mut [TraceVis]) {
+    traces.sort_by(|a, b| a.trace.generator.cmp(&b.trace.generator).then(a.trace.a.x.total_cmp(&b.trace.a.x)).then(a.trace.a.y.total_cmp(&b.trace.a.y)));
+}

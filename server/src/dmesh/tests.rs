@@ -1,0 +1,370 @@
+//! The mesh against its oracles: the pointwise backprojection
+//! (`edgepoint_scene::backprojection`) at random points of every face, a brute-force
+//! enumeration of every light-corner × edge and light-edge × vertex pair judged by what
+//! the light looks like on either side of the trace, and Euler's formula per receiver.
+use super::geometry::{edge_key, EdgeKey, Geometry};
+use super::segments::Generator;
+use super::*;
+use crate::rng::Rng;
+use edgepoint_scene::backprojection::{irradiance_with_blockers, Visible, LIGHT_GAP};
+use glam::{DVec3, Vec3};
+use std::collections::BTreeSet;
+
+/// A random convex light facing down, a floor of two triangles, random blocker triangles and
+/// a closed tetrahedron (shared edges, silhouettes) between them.
+fn random_scene(r: &mut Rng) -> (Geometry, LightPlane) {
+    let mut p = |s: f64, c: DVec3| c + DVec3::new(r.f64() - 0.5, r.f64() - 0.5, r.f64() - 0.5) * s;
+    let floor = (vec![DVec3::new(-2.0, 0.0, -2.0), DVec3::new(2.0, 0.0, -2.0), DVec3::new(2.0, 0.0, 2.0), DVec3::new(-2.0, 0.0, 2.0)], vec![[0, 1, 2], [0, 2, 3]]);
+    let mut objects = vec![floor];
+    let k = 2 + (p(1.0, DVec3::ZERO).x + 0.5).mul_add(2.0, 0.0) as usize;
+    for _ in 0..k {
+        let c = p(2.0, DVec3::new(0.0, 1.0, 0.0));
+        objects.push((vec![p(1.0, c), p(1.0, c), p(1.0, c)], vec![[0, 1, 2]]));
+    }
+    let c = p(1.5, DVec3::new(0.0, 1.0, 0.0));
+    let tet = vec![p(0.8, c), p(0.8, c), p(0.8, c), p(0.8, c)];
+    objects.push((tet, vec![[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]]));
+    let centre = p(1.0, DVec3::new(0.0, 2.6, 0.0));
+    let nl = (DVec3::NEG_Y + p(0.5, DVec3::ZERO)).normalize();
+    let u = nl.any_orthonormal_vector();
+    let w = nl.cross(u);
+    let corners = 3 + (p(1.0, DVec3::ZERO).x + 0.5).mul_add(2.99, 0.0) as usize;
+    let light: Vec<Vec3> = (0..corners)
+        .map(|i| {
+            let a = std::f64::consts::TAU * (i as f64 + 0.3 * p(1.0, DVec3::ZERO).x) / corners as f64;
+            (centre + (u * a.cos() + w * a.sin()) * 0.7).as_vec3()
+        })
+        .collect();
+    (Geometry::from_objects(&objects), LightPlane::new(&light).unwrap())
+}
+
+fn mesh_of(g: &Geometry, light: &LightPlane, tri: u32) -> Option<ReceiverMesh> {
+    let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
+    ReceiverMesh::compute(g, &grid, light, tri, tolerance(g), &mut Scratch::default())
+}
+
+/// Whether the open segment from `p` to `c` (short of the light by `LIGHT_GAP`) crosses a
+/// triangle's interior.
+fn blocked(g: &Geometry, skip: u32, p: DVec3, c: DVec3) -> bool {
+    let d = c - p;
+    (0..g.tris.len() as u32).filter(|t| *t != skip).any(|t| {
+        let [a, b, e] = g.tri(t);
+        let (e1, e2) = (b - a, e - a);
+        let h = d.cross(e2);
+        let det = e1.dot(h);
+        if det.abs() < 1e-300 {
+            return false;
+        }
+        let s = p - a;
+        let u = s.dot(h) / det;
+        let q = s.cross(e1);
+        let v = d.dot(q) / det;
+        let t = e2.dot(q) / det;
+        u > 0.0 && v > 0.0 && u + v < 1.0 && t > 1e-9 && t < 1.0 - LIGHT_GAP
+    })
+}
+
+/// The light corners above the receiver's plane visible from `p`.
+fn visible_corners(g: &Geometry, light: &LightPlane, m: &ReceiverMesh, p: DVec3) -> Vec<usize> {
+    (0..light.corners.len()).filter(|i| m.receiver.height(light.lift(light.corners[*i])) > m.receiver.tol && !blocked(g, m.receiver.tri, p, light.lift(light.corners[*i]))).collect()
+}
+
+/// The scene's blocker edges where the hidden part of light edge `li` (its part above the
+/// receiver) ends, seen from `p`: the hidden intervals of every triangle, projected from
+/// `p`, merged; labels of merged and clipped ends dropped.
+fn edge_labels(g: &Geometry, light: &LightPlane, m: &ReceiverMesh, li: usize, p: DVec3) -> BTreeSet<EdgeKey> {
+    let above = receiver::LightAbove::new(light, &m.receiver).unwrap();
+    let Some((y0, y1)) = above.edges[li] else { return BTreeSet::new() };
+    let (f0, f1) = (p + (y0 - p) * (1.0 - LIGHT_GAP), p + (y1 - p) * (1.0 - LIGHT_GAP));
+    let mn = (f0 - p).cross(f1 - p).normalize();
+    let mut iv: Vec<(f64, Option<EdgeKey>, f64, Option<EdgeKey>)> = Vec::new();
+    for t in 0..g.tris.len() as u32 {
+        if t == m.receiver.tri {
+            continue;
+        }
+        let tri = g.tri(t);
+        let ids = g.tris[t as usize];
+        let d = tri.map(|x| mn.dot(x - p));
+        let mut q = Vec::new();
+        for k in 0..3 {
+            let j = (k + 1) % 3;
+            if (d[k] > 0.0) != (d[j] > 0.0) {
+                q.push((tri[k] + (tri[j] - tri[k]) * (d[k] / (d[k] - d[j])), Some(edge_key(ids[k], ids[j]))));
+            }
+        }
+        if q.len() != 2 {
+            continue;
+        }
+        let fan = [p, f0, f1];
+        let (mut a, mut b) = (q[0], q[1]);
+        let mut empty = false;
+        for k in 0..3 {
+            let (s, e, o) = (fan[k], fan[(k + 1) % 3], fan[(k + 2) % 3]);
+            let side = |x: DVec3| (e - s).cross(x - s).dot(mn) * (e - s).cross(o - s).dot(mn).signum();
+            let (da, db) = (side(a.0), side(b.0));
+            if da < 0.0 && db < 0.0 {
+                empty = true;
+                break;
+            }
+            if da < 0.0 {
+                a = (a.0 + (b.0 - a.0) * (da / (da - db)), None);
+            } else if db < 0.0 {
+                b = (b.0 + (a.0 - b.0) * (db / (db - da)), None);
+            }
+        }
+        if empty {
+            continue;
+        }
+        let proj = |x: DVec3| -(y0 - p).cross(x - p).dot(mn) / (y1 - y0).cross(x - p).dot(mn);
+        let (ta, tb) = (proj(a.0), proj(b.0));
+        if ta <= tb {
+            iv.push((ta, a.1, tb, b.1));
+        } else {
+            iv.push((tb, b.1, ta, a.1));
+        }
+    }
+    iv.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut labels = BTreeSet::new();
+    let mut cur: Option<(f64, Option<EdgeKey>, f64, Option<EdgeKey>)> = None;
+    let close = |c: (f64, Option<EdgeKey>, f64, Option<EdgeKey>), labels: &mut BTreeSet<EdgeKey>| {
+        if c.2 - c.0 > 1e-12 {
+            if let (true, Some(l)) = (c.0 > 1e-12, c.1) {
+                labels.insert(l);
+            }
+            if let (true, Some(l)) = (c.2 < 1.0 - 1e-12, c.3) {
+                labels.insert(l);
+            }
+        }
+    };
+    for x in iv {
+        cur = match cur {
+            Some(c) if x.0 <= c.2 + 1e-12 => Some(if x.2 > c.2 { (c.0, c.1, x.2, x.3) } else { c }),
+            Some(c) => {
+                close(c, &mut labels);
+                Some(x)
+            }
+            None => Some(x),
+        };
+    }
+    if let Some(c) = cur {
+        close(c, &mut labels);
+    }
+    labels
+}
+
+fn dist_to_segment(q: DVec2, a: DVec2, b: DVec2) -> f64 {
+    let t = ((q - a).dot(b - a) / (b - a).length_squared().max(1e-300)).clamp(0.0, 1.0);
+    q.distance(a + (b - a) * t)
+}
+
+/// Random points of every face: the face's backprojection gives the pointwise
+/// backprojection's irradiance (all of the scene as blockers), and the light corners seen
+/// are those seen from the face's own interior point (no VE surface crosses a face).
+#[test]
+fn face_backprojections_equal_the_pointwise_backprojection() {
+    let mut r = Rng::new(2);
+    let (mut checked, mut partial, mut faces, mut worst) = (0, 0, 0, 0.0f64);
+    for _ in 0..12 {
+        let (g, light) = random_scene(&mut r);
+        for tri in 0..2 {
+            let Some(m) = mesh_of(&g, &light, tri) else { continue };
+            // Every triangle of the scene but those in the receiver's plane (the floor), which
+            // touch the point's pyramid at its apex only and cannot block.
+            let all: Vec<u32> = (0..g.tris.len() as u32).filter(|t| g.tri(*t).iter().any(|x| m.receiver.height(*x).abs() > 1e-9)).collect();
+            let arr = &m.arrangement;
+            faces += arr.faces.len();
+            for (f, bp) in m.faces.iter().enumerate() {
+                assert!(arr.face_contains(f, bp.point), "the interior point is in its face");
+                let (lo, hi) = arr.cycle(arr.faces[f].outer).map(|h| arr.vertices[arr.origin(h) as usize]).fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+                let seen0 = visible_corners(&g, &light, &m, m.receiver.to3(bp.point));
+                let mut n = 0;
+                for _ in 0..300 {
+                    if n == 6 {
+                        break;
+                    }
+                    let q = lo + (hi - lo) * DVec2::new(r.f64(), r.f64());
+                    if !arr.face_contains(f, q) || arr.distance_to_boundary(f, q) < 1e-5 {
+                        continue;
+                    }
+                    n += 1;
+                    let e = m.irradiance(&g, &light, q);
+                    let p = m.receiver.to3(q);
+                    // In f64 like the mesh (`irradiance_with_blockers` takes f32 triangles).
+                    let want = Visible::new(&light, p.as_vec3(), m.receiver.n.as_vec3()).map_or(0.0, |mut v| {
+                        for t in &all {
+                            v.occlude(g.tri(*t));
+                        }
+                        v.irradiance()
+                    });
+                    let free = irradiance_with_blockers(&light, p.as_vec3(), m.receiver.n.as_vec3(), []);
+                    assert!((e - want).abs() <= 1e-9 * free + 1e-12, "face {f}: {e} vs pointwise {want}");
+                    assert_eq!(visible_corners(&g, &light, &m, p), seen0, "face {f} at {q}: light corners seen");
+                    checked += 1;
+                    worst = worst.max((e - want).abs() / free.max(1e-300));
+                    partial += (want > 0.01 * free && want < 0.99 * free) as u32;
+                }
+            }
+        }
+    }
+    eprintln!("{checked} points, {partial} in penumbrae, {faces} faces; largest difference {worst:e} of the unoccluded light");
+    assert!(checked > 200 && partial > 30 && faces > 60, "{checked} points, {partial} in penumbrae, {faces} faces");
+}
+
+/// Every light-corner × scene-edge and light-edge × scene-vertex pair, brute force: along
+/// its trace on the floor, a point is a discontinuity when the light looks different just
+/// either side of it — the corner seen or not (VE), the blocker edges ending the hidden
+/// parts of the light edge (EV). The mesh has a segment of that generator there exactly
+/// when it is one (points near other segments, ends or sides are ambiguous and skipped).
+#[test]
+fn segments_equal_a_brute_force_enumeration() {
+    let mut r = Rng::new(7);
+    let (mut yes, mut no) = (0, 0);
+    for _ in 0..10 {
+        let (g, light) = random_scene(&mut r);
+        for tri in 0..2 {
+            let Some(m) = mesh_of(&g, &light, tri) else { continue };
+            let rc = &m.receiver;
+            let above = receiver::LightAbove::new(&light, rc).unwrap();
+            let mut check = |gen: Generator, trace: &[DVec2], judge: &dyn Fn(DVec3) -> BTreeSet<EdgeKey>| {
+                for w in trace.windows(3) {
+                    let (q, dir) = (w[1], (w[2] - w[0]).normalize_or_zero());
+                    if dir == DVec2::ZERO || !rc.contains(q) || (0..3).any(|k| dist_to_segment(q, rc.corners[k], rc.corners[(k + 1) % 3]) < 1e-5) {
+                        continue;
+                    }
+                    let near_other = m.segments.iter().any(|s| (s.generator != gen && dist_to_segment(q, s.a, s.b) < 1e-5) || s.a.distance(q) < 1e-5 || s.b.distance(q) < 1e-5);
+                    if near_other {
+                        continue;
+                    }
+                    let off = dir.perp() * 1e-8;
+                    let disc = judge(rc.to3(q + off)) != judge(rc.to3(q - off));
+                    let claimed = m.segments.iter().any(|s| s.generator == gen && dist_to_segment(q, s.a, s.b) < 1e-7);
+                    assert_eq!(disc, claimed, "{gen:?} at {q}: discontinuity {disc}, mesh segment {claimed}");
+                    if disc {
+                        yes += 1;
+                    } else {
+                        no += 1;
+                    }
+                }
+            };
+            let edges: BTreeSet<EdgeKey> = g.tris.iter().flat_map(|t| (0..3).map(move |k| edge_key(t[k], t[(k + 1) % 3]))).collect();
+            for (li, v) in above.vertices.iter().enumerate() {
+                let Some(v) = *v else { continue };
+                for &e in &edges {
+                    let (a, b) = (g.pos[e.0 as usize], g.pos[e.1 as usize]);
+                    let trace: Vec<DVec2> = (0..=400)
+                        .filter_map(|i| {
+                            let x = a + (b - a) * (i as f64 / 400.0);
+                            let (hx, hv) = (rc.height(x), rc.height(v));
+                            (hx > 1e-9 && hx < hv && light.height(x) > 0.0).then(|| rc.to2(v + (x - v) * (hv / (hv - hx))))
+                        })
+                        .collect();
+                    let judge = |p: DVec3| -> BTreeSet<EdgeKey> { if blocked(&g, tri, p, v) { BTreeSet::new() } else { [(0, 0)].into() } };
+                    check(Generator::Ve { light_vertex: li as u32, edge: e }, &trace, &judge);
+                }
+            }
+            for (li, e) in above.edges.iter().enumerate() {
+                let Some((y0, y1)) = *e else { continue };
+                for w in 0..g.pos.len() as u32 {
+                    let wp = g.pos[w as usize];
+                    let hw = rc.height(wp);
+                    let trace: Vec<DVec2> = (0..=400)
+                        .filter_map(|i| {
+                            let y = y0 + (y1 - y0) * (i as f64 / 400.0);
+                            let hy = rc.height(y);
+                            (hw > 1e-9 && hy > hw && light.height(wp) > 0.0).then(|| rc.to2(y + (wp - y) * (hy / (hy - hw))))
+                        })
+                        .collect();
+                    let judge = |p: DVec3| edge_labels(&g, &light, &m, li, p);
+                    check(Generator::Ev { light_edge: li as u32, vertex: w }, &trace, &judge);
+                }
+            }
+        }
+    }
+    assert!(yes > 300 && no > 300, "{yes} discontinuity points, {no} others");
+}
+
+/// Euler's formula on every receiver of random scenes and of the Cornell box: V − E + F =
+/// 1 + C (F with the unbounded face, C the connected components), and every face's interior
+/// point lies in that face only.
+#[test]
+fn every_receiver_satisfies_eulers_formula() {
+    let mut r = Rng::new(11);
+    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..6)
+        .map(|_| {
+            let (g, l) = random_scene(&mut r);
+            (g, vec![l])
+        })
+        .collect();
+    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
+    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    let mut receivers = 0;
+    for (g, lights) in &scenes {
+        let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
+        let mesh = DiscontinuityMesh::compute(g, &grid, lights);
+        for m in mesh.receivers() {
+            let a = &m.arrangement;
+            let (v, e, f) = (a.vertices.len() as i64, a.edges.len() as i64, a.faces.len() as i64 + 1);
+            assert_eq!(v - e + f, 1 + a.components as i64, "receiver {}: V {v} E {e} F {f} C {}", m.receiver.tri, a.components);
+            for (i, bp) in m.faces.iter().enumerate() {
+                let holders: Vec<usize> = (0..a.faces.len()).filter(|j| a.face_contains(*j, bp.point)).collect();
+                assert_eq!(holders, vec![i], "receiver {}: face {i}'s point", m.receiver.tri);
+            }
+            receivers += 1;
+        }
+        assert!(mesh.segment_count() > 0);
+    }
+    assert!(receivers > 20, "{receivers}");
+}
+
+/// A random rigid move of object `o` about its centre: a rotation of up to `angle` radians
+/// about a random axis and a translation of up to `step` per axis.
+fn random_move(g: &Geometry, o: u32, r: &mut Rng, step: f64, angle: f64) -> Geometry {
+    let vs = g.object_vertices(o);
+    let c = vs.clone().map(|v| g.pos[v as usize]).sum::<DVec3>() / vs.len().max(1) as f64;
+    let axis = DVec3::new(r.f64() - 0.5, r.f64() - 0.5, r.f64() - 0.5).normalize_or(DVec3::Y);
+    let rot = glam::DQuat::from_axis_angle(axis, (r.f64() - 0.5) * 2.0 * angle);
+    let d = DVec3::new(r.f64() - 0.5, r.f64() - 0.5, r.f64() - 0.5) * 2.0 * step;
+    g.moved(o, |p| c + d + rot * (p - c))
+}
+
+/// Random moves of random objects: the incremental mesh equals a full recomputation
+/// (`update::mismatches` is 0), and the moves do reach receivers of other objects.
+fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[u32], moves: usize, step: f64, seed: u64) -> usize {
+    let mut r = Rng::new(seed);
+    let mut grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
+    let mut mesh = DiscontinuityMesh::compute(&g, &grid, &lights);
+    let mut updated = 0;
+    for i in 0..moves {
+        let o = objects[i % objects.len()];
+        let new = random_move(&g, o, &mut r, step, 0.4);
+        let stats = mesh.move_object(&g, &new, &mut grid, o);
+        g = new;
+        let full = DiscontinuityMesh::compute(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights);
+        assert_eq!(update::mismatches(&mesh, &full), 0, "move {i} of object {o}: {stats:?}");
+        assert_eq!(mesh.segment_count(), full.segment_count());
+        updated += stats.receivers_updated;
+    }
+    updated
+}
+
+#[test]
+fn incremental_update_equals_full_recomputation_on_random_scenes() {
+    let mut r = Rng::new(5);
+    let mut updated = 0;
+    for k in 0..5 {
+        let (g, light) = random_scene(&mut r);
+        let objects: Vec<u32> = (1..g.vertex_start.len() as u32).collect();
+        updated += incremental_equals_full(g, vec![light], &objects, 6, 0.3, 100 + k);
+    }
+    assert!(updated > 10, "{updated} receivers updated");
+}
+
+#[test]
+fn incremental_update_equals_full_recomputation_in_the_cornell_box() {
+    let scene = edgepoint_scene::builtin::load("cornell").unwrap();
+    let g = Geometry::from_scene(&scene);
+    let boxes: Vec<u32> = scene.objects.iter().enumerate().filter(|(_, o)| o.name.contains("box") || o.name.contains("block")).map(|(i, _)| i as u32).collect();
+    assert!(!boxes.is_empty(), "{:?}", scene.objects.iter().map(|o| &o.name).collect::<Vec<_>>());
+    let updated = incremental_equals_full(g, area_lights(&scene), &boxes, 6, 30.0, 9);
+    assert!(updated > 0);
+}
