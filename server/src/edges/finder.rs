@@ -15,7 +15,7 @@ use super::geometric::{MeshEdgeTrees, SharpTree};
 use super::shadow::{ShadowScene, ShadowStore, ShadowUpdateStats};
 use super::simplify::EdgeErrors;
 use super::{EdgeCounts, EdgeKind, EdgeSegment};
-use crate::session::TripleKey;
+use crate::edges::TripleKey;
 use edgepoint_scene::{Camera, Light, Mesh, Progress, Scene};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;

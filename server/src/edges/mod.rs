@@ -21,6 +21,15 @@ pub mod tree;
 pub mod umbra;
 pub mod wedge;
 
+/// A shadow ray from `receiver` toward `light` was blocked by `blocker` (the shaders'
+/// light–blocker–receiver triples, paper 000 §6.5): which pairs need shadow edges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TripleKey {
+    pub light: u32,
+    pub blocker: u32,
+    pub receiver: u32,
+}
+
 /// Default sharp-edge cut-off (paper §6.2: "In our scenes, the cutoff angle is 85°"): an edge
 /// whose face normals differ by at least this angle is sharp.
 pub const DEFAULT_SHARP_CUTOFF_DEGREES: f32 = 85.0;

@@ -29,7 +29,7 @@ use super::geometric::MeshEdgeTrees;
 use super::umbra::{umbra_ends, UmbraEnds};
 use super::wedge::{search, Piece, SearchScratch, Wedge};
 use super::EdgeSegment;
-use crate::session::TripleKey;
+use crate::edges::TripleKey;
 use edgepoint_scene::{Light, Mesh, NO_FACE};
 use glam::{Affine3A, DAffine3, DMat3};
 use rayon::prelude::*;

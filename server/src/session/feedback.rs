@@ -6,13 +6,8 @@
 use edgepoint_proto::SampleBatch;
 use std::collections::HashMap;
 
-/// A shadow ray from `receiver` toward `light` was blocked by `blocker`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct TripleKey {
-    pub light: u32,
-    pub blocker: u32,
-    pub receiver: u32,
-}
+// The edge finder's key (it lives with the algorithm, which the session feeds).
+pub use crate::edges::TripleKey;
 
 /// Accumulated shading feedback of one session.
 #[derive(Debug, Clone, Default)]

@@ -1,7 +1,7 @@
 use super::*;
 use crate::edges::finder::EdgeFinder;
 use crate::edges::EdgeKind;
-use crate::session::TripleKey;
+use crate::edges::TripleKey;
 use edgepoint_scene::backprojection::irradiance_with_blockers;
 use edgepoint_scene::builtin::shapes::{cuboid, polygon};
 use edgepoint_scene::{Camera, Material, NoProgress, Object, Scene};
