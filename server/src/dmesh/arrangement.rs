@@ -39,7 +39,7 @@ impl Arrangement {
     #[inline]
     pub fn origin(&self, h: u32) -> u32 {
         let e = &self.edges[(h / 2) as usize].0;
-        if h % 2 == 0 {
+        if h.is_multiple_of(2) {
             e[0]
         } else {
             e[1]

@@ -187,6 +187,7 @@ impl Shaft {
 /// The triangles that can block some line from the light (above the plane) to the receiver:
 /// meeting the shaft, with a corner above the receiver's plane and one in front of the light,
 /// not the receiver. Every occluder of every point of the face is among them.
+#[allow(clippy::too_many_arguments)] // the grid query's scratch (out, stamp, epoch) is the caller's, reused across receivers
 pub fn shaft_blockers(g: &Geometry, grid: &Grid, light: &LightPlane, r: &Receiver, shaft: &Shaft, out: &mut Vec<u32>, stamp: &mut Vec<u32>, epoch: &mut u32) {
     out.clear();
     grid.query(shaft.lo, shaft.hi, stamp, epoch, |t| {

@@ -175,6 +175,7 @@ pub fn outline_parts(g: &Geometry, w: u32, y0: DVec3, y1: DVec3, tol: f64, out: 
 /// The EV traces of light edge `li` (its part above the receiver, `y0 y1`) and blocker
 /// vertex `w`: one per part of the edge from which `w` is on the outline and whose shadow
 /// reaches the receiver.
+#[allow(clippy::too_many_arguments)] // the caller's scratch (parts) and output are passed in, reused across traces
 pub fn ev_traces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, (y0, y1): (DVec3, DVec3), w: u32, parts: &mut Vec<(f64, f64)>, out: &mut Vec<Trace>) {
     let wp = g.pos[w as usize];
     let hw = r.height(wp);

@@ -674,7 +674,9 @@ impl Dispatcher {
         self.try_submit(batch).is_ok()
     }
 
-    /// [`Dispatcher::submit`] that hands a refused batch back.
+    /// [`Dispatcher::submit`] that hands a refused batch back (by value: a refusal is the
+    /// rare path, and the caller owns the batch again without an allocation).
+    #[allow(clippy::result_large_err)]
     pub fn try_submit(&self, batch: RequestBatch) -> Result<(), RequestBatch> {
         let sh = &self.shared;
         if sh.queue_rx.len() >= sh.cfg.queue_batches {
