@@ -110,14 +110,12 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let mut g = g;
     let (mut incr_ms, mut full_after_ms, mut bad, mut moves) = (Vec::new(), Vec::new(), 0usize, Vec::new());
     for _ in 0..a.moves {
-        let vs = g.object_vertices(object);
-        let (olo, ohi) = vs.clone().fold((glam::DVec3::splat(f64::INFINITY), glam::DVec3::splat(f64::NEG_INFINITY)), |(l, h), v| (l.min(g.pos[v as usize]), h.max(g.pos[v as usize])));
-        let c = (olo + ohi) * 0.5;
+        let (olo, ohi) = g.object_bounds(object);
         let step = a.step * (ohi - olo).length();
         let axis = glam::DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5).normalize_or(glam::DVec3::Y);
         let rot = glam::DQuat::from_axis_angle(axis, (rng.f64() - 0.5) * 0.4);
         let d = glam::DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 2.0 * step;
-        let new = g.moved(object, |p| c + d + rot * (p - c));
+        let new = g.moved_rigidly(object, rot, d);
         let t = Instant::now();
         let stats = mesh.move_object(&g, &new, &mut grid, object);
         let ti = t.elapsed().as_secs_f64() * 1e3;

@@ -156,27 +156,30 @@ pub fn unpack_samples(bytes: &[u8]) -> Result<Vec<Sample>, PackedError> {
 /// Moves a batch's packed requests into `requests` (a batch with neither or only
 /// `requests` is left as it is).
 pub fn unpack_request_batch(b: &mut RequestBatch) -> Result<(), PackedError> {
-    if b.packed_requests.is_empty() {
-        return Ok(());
-    }
-    if !b.requests.is_empty() {
-        return Err(PackedError::Both { what: "requests" });
-    }
-    b.requests = unpack_requests(&b.packed_requests)?;
-    b.packed_requests = Vec::new();
-    Ok(())
+    unpack_into(&mut b.packed_requests, &mut b.requests, "requests", unpack_requests)
 }
 
 /// Moves a batch's packed samples into `samples`.
 pub fn unpack_sample_batch(b: &mut SampleBatch) -> Result<(), PackedError> {
-    if b.packed_samples.is_empty() {
+    unpack_into(&mut b.packed_samples, &mut b.samples, "samples", unpack_samples)
+}
+
+/// Replaces `unpacked` by the records of `packed` (emptied), unless there are none; a
+/// batch may hold one form or the other, not both.
+fn unpack_into<T>(
+    packed: &mut Vec<u8>,
+    unpacked: &mut Vec<T>,
+    what: &'static str,
+    unpack: fn(&[u8]) -> Result<Vec<T>, PackedError>,
+) -> Result<(), PackedError> {
+    if packed.is_empty() {
         return Ok(());
     }
-    if !b.samples.is_empty() {
-        return Err(PackedError::Both { what: "samples" });
+    if !unpacked.is_empty() {
+        return Err(PackedError::Both { what });
     }
-    b.samples = unpack_samples(&b.packed_samples)?;
-    b.packed_samples = Vec::new();
+    *unpacked = unpack(packed)?;
+    *packed = Vec::new();
     Ok(())
 }
 

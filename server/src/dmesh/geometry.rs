@@ -39,21 +39,12 @@ pub struct Geometry {
 impl Geometry {
     /// The scene's objects at their default transforms.
     pub fn from_scene(scene: &Scene) -> Geometry {
-        let mut pos = Vec::new();
-        let mut tris = Vec::new();
-        let mut object = Vec::new();
-        let (mut vertex_start, mut tri_start) = (Vec::new(), Vec::new());
-        for (oi, o) in scene.objects.iter().enumerate() {
-            let base = pos.len() as u32;
-            vertex_start.push(base);
-            tri_start.push(tris.len() as u32);
-            pos.extend(o.mesh.positions.iter().map(|p| o.transform.transform_point3(*p).as_dvec3()));
-            for t in &o.mesh.triangles {
-                tris.push([t[0] + base, t[1] + base, t[2] + base]);
-                object.push(oi as u32);
-            }
-        }
-        Geometry::from_parts(pos, tris, object, vertex_start, tri_start)
+        let objects: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = scene
+            .objects
+            .iter()
+            .map(|o| (o.mesh.positions.iter().map(|p| o.transform.transform_point3(*p).as_dvec3()).collect(), o.mesh.triangles.clone()))
+            .collect();
+        Geometry::from_objects(&objects)
     }
 
     /// A triangle soup given per object (tests, and objects moved by [`Geometry::moved`]).
@@ -120,13 +111,31 @@ impl Geometry {
         g
     }
 
+    /// Object `o` turned by `rot` about the centre of its box, then moved by `d` (the
+    /// benchmark's and the tests' rigid moves).
+    pub fn moved_rigidly(&self, o: u32, rot: glam::DQuat, d: DVec3) -> Geometry {
+        let (lo, hi) = self.object_bounds(o);
+        let c = (lo + hi) * 0.5;
+        self.moved(o, |p| c + d + rot * (p - c))
+    }
+
+    /// Axis-aligned bounds of object `o`.
+    pub fn object_bounds(&self, o: u32) -> (DVec3, DVec3) {
+        bounds_of(self.object_vertices(o).map(|v| self.pos[v as usize]))
+    }
+
     /// Axis-aligned bounds of the whole scene.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.pos.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        bounds_of(self.pos.iter().copied())
     }
 
     /// Bytes held by the geometry and its adjacency (for the benchmark's memory figure).
     pub fn bytes(&self) -> usize {
         self.pos.len() * 24 + self.tris.len() * 16 + self.edge_tris.len() * 48 + self.neighbours.iter().map(|n| 24 + n.len() * 4).sum::<usize>()
     }
+}
+
+/// Axis-aligned bounds of some points (inverted, infinite ones for none).
+fn bounds_of(points: impl Iterator<Item = DVec3>) -> (DVec3, DVec3) {
+    points.fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)))
 }

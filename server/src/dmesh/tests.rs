@@ -316,27 +316,41 @@ fn every_receiver_satisfies_eulers_formula() {
     assert!(receivers > 20, "{receivers}");
 }
 
-/// A random rigid move of object `o` about its centre: a rotation of up to `angle` radians
+/// The point a random move turns an object about.
+#[derive(Clone, Copy)]
+enum Pivot {
+    /// The mean of its vertices.
+    Mean,
+    /// The centre of its box (the benchmark's, [`Geometry::moved_rigidly`]).
+    BoxCentre,
+}
+
+/// A random rigid move of object `o` about `pivot`: a rotation of up to `angle` radians
 /// about a random axis and a translation of up to `step` per axis.
-fn random_move(g: &Geometry, o: u32, r: &mut Rng, step: f64, angle: f64) -> Geometry {
-    let vs = g.object_vertices(o);
-    let c = vs.clone().map(|v| g.pos[v as usize]).sum::<DVec3>() / vs.len().max(1) as f64;
+fn random_move(g: &Geometry, o: u32, r: &mut Rng, step: f64, angle: f64, pivot: Pivot) -> Geometry {
     let axis = DVec3::new(r.f64() - 0.5, r.f64() - 0.5, r.f64() - 0.5).normalize_or(DVec3::Y);
     let rot = glam::DQuat::from_axis_angle(axis, (r.f64() - 0.5) * 2.0 * angle);
     let d = DVec3::new(r.f64() - 0.5, r.f64() - 0.5, r.f64() - 0.5) * 2.0 * step;
-    g.moved(o, |p| c + d + rot * (p - c))
+    match pivot {
+        Pivot::BoxCentre => g.moved_rigidly(o, rot, d),
+        Pivot::Mean => {
+            let vs = g.object_vertices(o);
+            let c = vs.clone().map(|v| g.pos[v as usize]).sum::<DVec3>() / vs.len().max(1) as f64;
+            g.moved(o, |p| c + d + rot * (p - c))
+        }
+    }
 }
 
 /// Random moves of random objects: the incremental mesh equals a full recomputation
 /// (`update::mismatches` is 0), and the moves do reach receivers of other objects.
-fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[u32], moves: usize, step: f64, seed: u64) -> usize {
+fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[u32], moves: usize, step: f64, seed: u64, pivot: Pivot) -> usize {
     let mut r = Rng::new(seed);
     let mut grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
     let mut mesh = DiscontinuityMesh::compute(&g, &grid, &lights);
     let mut updated = 0;
     for i in 0..moves {
         let o = objects[i % objects.len()];
-        let new = random_move(&g, o, &mut r, step, 0.4);
+        let new = random_move(&g, o, &mut r, step, 0.4, pivot);
         let stats = mesh.move_object(&g, &new, &mut grid, o);
         g = new;
         let full = DiscontinuityMesh::compute(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights);
@@ -347,16 +361,32 @@ fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[
     updated
 }
 
-#[test]
-fn incremental_update_equals_full_recomputation_on_random_scenes() {
+/// Random scenes moved about `pivot`; returns the receivers updated.
+fn random_scenes_incremental_equals_full(pivot: Pivot) -> usize {
     let mut r = Rng::new(5);
     let mut updated = 0;
     for k in 0..5 {
         let (g, light) = random_scene(&mut r);
         let objects: Vec<u32> = (1..g.vertex_start.len() as u32).collect();
-        updated += incremental_equals_full(g, vec![light], &objects, 6, 0.3, 100 + k);
+        updated += incremental_equals_full(g, vec![light], &objects, 6, 0.3, 100 + k, pivot);
     }
+    updated
+}
+
+#[test]
+fn incremental_update_equals_full_recomputation_on_random_scenes() {
+    let updated = random_scenes_incremental_equals_full(Pivot::Mean);
     assert!(updated > 10, "{updated} receivers updated");
+}
+
+/// The same random scenes and moves turned about each object's box centre instead: the
+/// third move of object 1 in one of them leaves one receiver different from a full
+/// recomputation (found while folding the benchmark's and the tests' moves into one; not
+/// yet understood — README, "What is not done yet").
+#[test]
+#[ignore = "known defect: incremental ≠ full on one receiver (README, What is not done yet)"]
+fn incremental_update_equals_full_recomputation_with_moves_about_the_box_centre() {
+    random_scenes_incremental_equals_full(Pivot::BoxCentre);
 }
 
 #[test]
@@ -365,6 +395,6 @@ fn incremental_update_equals_full_recomputation_in_the_cornell_box() {
     let g = Geometry::from_scene(&scene);
     let boxes: Vec<u32> = scene.objects.iter().enumerate().filter(|(_, o)| o.name.contains("box") || o.name.contains("block")).map(|(i, _)| i as u32).collect();
     assert!(!boxes.is_empty(), "{:?}", scene.objects.iter().map(|o| &o.name).collect::<Vec<_>>());
-    let updated = incremental_equals_full(g, area_lights(&scene), &boxes, 6, 30.0, 9);
+    let updated = incremental_equals_full(g, area_lights(&scene), &boxes, 6, 30.0, 9, Pivot::Mean);
     assert!(updated > 0);
 }
