@@ -275,6 +275,7 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
         let mut stage_order: Vec<String> = Vec::new();
         let mut totals = Vec::new();
         let mut samples = Vec::new();
+        let mut between = Vec::new();
         let mut last: Option<pb::Frame> = None;
         let mut first_at: Option<Instant> = None;
         // The server's CPU time (every thread: the frame loop, its rayon pool, the gRPC
@@ -309,6 +310,7 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
                     }
                     totals.push(f.total_ms);
                     samples.push(f.samples_used as f64);
+                    between.push(f.between_ms);
                     dropped = f.frames_dropped;
                     if f.edges.as_ref().is_some_and(|e| e.edge_trees) {
                         first_tree_frame.get_or_insert(f.sequence);
@@ -350,6 +352,9 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
             "stages_median_ms": stage_order.iter().map(|s| (s.clone(), json!(median(&stage_ms[s])))).collect::<serde_json::Map<_, _>>(),
             "total_median_ms": median_total,
             "server_cpu_ms_per_frame": server_cpu_ms_per_frame,
+            // Samples that arrived while the loop waited for the frame are inserted then,
+            // outside the frame's time (its count is in the samples per frame).
+            "between_frames_median_ms": median(&between),
             "pipeline_fps": if median_total > 0.0 { 1000.0 / median_total } else { 0.0 },
             "fps": fps,
             "samples_per_frame_mean": mean_samples,
@@ -405,6 +410,7 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
             writeln!(table, "  {:<14} {:>8.2} ms (median)", s, median(&stage_ms[s]))?;
         }
         writeln!(table, "  {:<14} {:>8.2} ms (median) -> pipeline {:.1} fps", "total", median_total, out["pipeline_fps"].as_f64().unwrap_or(0.0))?;
+        writeln!(table, "  {:<14} {:>8.2} ms (median; samples inserted while waiting for the frame, not in total)", "between frames", median(&between))?;
         if let Some(cpu) = server_cpu_ms_per_frame {
             writeln!(table, "  server CPU     {cpu:>8.2} ms per frame (all its threads)")?;
         }

@@ -77,6 +77,9 @@ pub struct FrameStats {
     pub epoch: u64,
     pub live_workers: u32,
     pub frames_dropped: u64,
+    /// Server milliseconds spent, before this frame, inserting samples that arrived while
+    /// it waited for the frame (not in `total_ms`).
+    pub between_ms: f64,
     /// Server seconds since session start when the frame was made.
     pub sim_time: f64,
     /// Viewer seconds since the session started when the frame arrived.
@@ -274,6 +277,7 @@ impl FrameStats {
             epoch: f.epoch,
             live_workers: f.live_workers,
             frames_dropped: f.frames_dropped,
+            between_ms: f.between_ms,
             sim_time: f.sim_time,
             received_s: a.received_s,
             interval_ms: a.interval_ms,

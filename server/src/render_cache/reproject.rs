@@ -294,10 +294,10 @@ impl RenderCache {
             .enumerate()
             .map(|(y, ((mut r, bits), changed))| {
                 // Ages first (a stale point's stays STALE_AGE; a missing point's infinity).
+                // As a select, not a branch, so that the loop vectorises.
                 for (a, &b) in r.ag.iter_mut().zip(r.bo.iter()) {
-                    if *a < STALE_AGE {
-                        *a = RenderCache::age_of(frame, b);
-                    }
+                    let grown = RenderCache::age_of(frame, b);
+                    *a = if *a < STALE_AGE { grown } else { *a };
                 }
                 let (mut dc, mut ds) = (0i64, 0i64);
                 for (k, &word) in bits.iter().enumerate() {

@@ -68,14 +68,17 @@ pub const PRIORITY_STALE_POINT: f32 = 0.6;
 /// weight, `age` the age of the pixel's point in frames (`f32::INFINITY` if it has none).
 #[inline]
 pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
+    // Every case computed and the answer selected, without branches: the priority loop
+    // over the image then vectorises (the same values as choosing first).
     let weight = if weight.is_finite() { weight.max(0.0) } else { 0.0 };
+    let unreached = PRIORITY_UNREACHED / (1.0 + weight);
+    let a = if max_age_frames > 0.0 { (age.max(0.0) / max_age_frames).min(1.0) } else { 1.0 };
+    let aged = PRIORITY_FRESH_POINT + (PRIORITY_OLD_POINT - PRIORITY_FRESH_POINT) * a;
+    let point = if age >= crate::render_cache::STALE_AGE { PRIORITY_STALE_POINT } else { aged };
     if age.is_nan() || age == f32::INFINITY {
-        PRIORITY_UNREACHED / (1.0 + weight)
-    } else if age >= crate::render_cache::STALE_AGE {
-        PRIORITY_STALE_POINT
+        unreached
     } else {
-        let a = if max_age_frames > 0.0 { (age.max(0.0) / max_age_frames).min(1.0) } else { 1.0 };
-        PRIORITY_FRESH_POINT + (PRIORITY_OLD_POINT - PRIORITY_FRESH_POINT) * a
+        point
     }
 }
 

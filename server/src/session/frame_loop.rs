@@ -31,7 +31,7 @@ use crate::render_cache::fresh::STAGE_STALE;
 use crate::sampling::{aim_at_points, PixelRequest, Sampler, SamplingConfig};
 use crate::stage_times::StageTimes;
 use crate::visibility::{Visibility, STAGE_VISIBILITY};
-use crate::workers::Dispatcher;
+use crate::workers::{Answer, Dispatcher};
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
 use edgepoint_scene::geometry::transformed_box;
@@ -169,7 +169,13 @@ pub(super) struct FrameLoop {
     pub feedback: ShadingFeedback,
     times: StageTimes,
     encoder: FrameEncoder,
+    /// Sample batches taken from the workers and not yet inserted.
     answers: Vec<pb::SampleBatch>,
+    /// Samples inserted while the loop waited for the next frame, and the time it took
+    /// (reported with the next frame).
+    between: (u32, f64),
+    /// The time of those inserted before the frame being made (`Frame.between_ms`).
+    between_ms: f64,
     picks: Vec<PixelRequest>,
     batches: Vec<pb::RequestBatch>,
     next_batch_id: u64,
@@ -242,6 +248,8 @@ impl FrameLoop {
             times: StageTimes::new(),
             encoder: FrameEncoder::new(),
             answers: Vec::new(),
+            between: (0, 0.0),
+            between_ms: 0.0,
             picks: Vec::new(),
             batches: Vec::new(),
             next_batch_id: 0,
@@ -284,7 +292,9 @@ impl FrameLoop {
 
     fn frame(&mut self, t0: Instant) {
         let t = Instant::now();
-        let samples_used = self.insert_samples();
+        let (between, between_ms) = std::mem::take(&mut self.between);
+        self.between_ms = between_ms;
+        let samples_used = between + self.insert_samples();
         self.times.add("samples", ms_since(t));
 
         let (counts, epi_counts) = self.reconstruct();
@@ -458,6 +468,7 @@ impl FrameLoop {
             reconstruction: self.settings.reconstruction.to_wire() as i32,
             camera: Some(camera_to_wire(&self.camera)),
             overlay: overlay_to_wire(self.settings.overlay) as i32,
+            between_ms: self.between_ms,
         };
         self.out.publish_frame(frame);
     }
@@ -589,9 +600,9 @@ impl FrameLoop {
         self.recent_moves.push_back((self.epoch, region));
     }
 
-    /// Drains answers from the workers into the cache; returns samples inserted.
+    /// Drains answers from the workers into the cache (with those already taken); returns
+    /// samples inserted.
     fn insert_samples(&mut self) -> u32 {
-        self.answers.clear();
         self.dispatcher.drain(&mut self.answers);
         let mut inserted = 0u32;
         let objects = self.moved_at.len() as u32;
@@ -678,6 +689,7 @@ impl FrameLoop {
             let ring = &self.ring;
             self.counters.parts_forgotten += self.split.forget(|id| ring.get(id).is_some()) as u64;
         }
+        self.answers.clear();
         self.counters.samples_inserted += inserted as u64;
         self.counters.averaged = self.cache.averaged();
         inserted
@@ -726,6 +738,13 @@ impl FrameLoop {
     /// first motion at the interactive rate. Returns early only for that or when the viewer
     /// is gone.
     fn wait_inputs(&mut self, soon: Instant, late: Instant) {
+        /// What ended one wait.
+        enum Woke {
+            Input(Input),
+            InputsClosed,
+            Answer(Answer),
+            Timeout,
+        }
         loop {
             if self.out.is_closed() {
                 return;
@@ -736,14 +755,27 @@ impl FrameLoop {
                 return;
             }
             let step = if motion { soon } else { late }.min(now + POLL);
+            // Samples that arrive while the loop waits (most of a frame at rest, paced down to
+            // `rest_fps`) are inserted at once rather than at the start of the next frame:
+            // the same insertions in the same order (nothing reads or changes the cache in
+            // between), off the frame's critical path.
+            let mut select = flume::Selector::new();
             if self.inputs_open {
-                match self.inputs.recv_deadline(step) {
-                    Ok(i) => self.pending.push(i),
-                    Err(flume::RecvTimeoutError::Timeout) => {}
-                    Err(flume::RecvTimeoutError::Disconnected) => self.inputs_open = false,
+                select = select.recv(&self.inputs, |r| r.map_or(Woke::InputsClosed, Woke::Input));
+            }
+            let woke = select.recv(self.dispatcher.answers(), |r| r.map_or(Woke::Timeout, Woke::Answer)).wait_deadline(step).unwrap_or(Woke::Timeout);
+            match woke {
+                Woke::Input(i) => self.pending.push(i),
+                Woke::InputsClosed => self.inputs_open = false,
+                Woke::Answer(a) => {
+                    if let Answer::Samples { batch, .. } = a {
+                        self.answers.push(batch);
+                    }
+                    let t = Instant::now();
+                    self.between.0 += self.insert_samples();
+                    self.between.1 += ms_since(t);
                 }
-            } else {
-                std::thread::sleep(step - now);
+                Woke::Timeout => {}
             }
         }
     }

@@ -186,6 +186,7 @@ pub fn frame_header(f: &pb::Frame, tiles: &[u32], sent_ms: f64, latency_ms: Opti
         "samples_used": f.samples_used,
         "samples_requested": f.samples_requested,
         "frames_dropped": f.frames_dropped,
+        "between_ms": f.between_ms,
         "live_workers": f.live_workers,
         "camera": camera(&f.camera),
         "epoch": f.epoch,

@@ -723,6 +723,12 @@ impl Dispatcher {
         out.len() - before
     }
 
+    /// The answers as they come (samples or dropped batches), for a loop that waits on them
+    /// beside other channels; [`Dispatcher::drain`] takes those ready.
+    pub fn answers(&self) -> &flume::Receiver<Answer> {
+        &self.shared.answers_rx
+    }
+
     /// Waits for the next answer (samples or a dropped batch). For async users; a session's
     /// frame loop uses [`Dispatcher::drain`]. The dispatcher keeps a sender, so this only
     /// returns `None` if the dispatcher is being torn down.
