@@ -5,6 +5,7 @@
 //! hits from different instances compare directly. Moving an object rebuilds nothing of its
 //! own BVH — the property paper 000 §6.5 relies on for moving objects.
 mod collapse;
+mod huge_pages;
 mod node_test;
 mod sah_build;
 mod tri4;
@@ -17,6 +18,7 @@ use obvhs::aabb::Aabb;
 use node_test::Avx2;
 use node_test::{Baseline, NodeTest};
 pub use node_test::Simd;
+use huge_pages::HugeArray;
 use tri4::{Tri4, TriTest};
 use std::marker::PhantomData;
 use wide::{Bvh8, Bvh8Build, Leaf, LeafSlots, PreparedRay};
@@ -26,8 +28,8 @@ use wide::{Bvh8, Bvh8Build, Leaf, LeafSlots, PreparedRay};
 pub struct ObjectBvh {
     bvh: Bvh8,
     /// One block per leaf (the leaf payload indexes it), holding the mesh's triangle
-    /// indices: a hit needs nothing else.
-    blocks: Vec<Tri4>,
+    /// indices: a hit needs nothing else. In huge-page-advised memory when large.
+    blocks: HugeArray<Tri4>,
     triangles: usize,
     bounds: (Vec3, Vec3),
 }
@@ -45,23 +47,21 @@ impl ObjectBvh {
         let binary = start.elapsed();
         let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&b2);
         let collapsed = start.elapsed();
-        let blocks: Vec<Tri4> = leaves
-            .iter()
-            .map(|l: &LeafSlots| {
-                let mut tris = [(0u32, [Vec3::ZERO; 3]); wide::MAX_LEAF as usize];
-                let ids = &prims[l.first as usize..(l.first + l.count) as usize];
-                for (slot, &f) in tris.iter_mut().zip(ids) {
-                    *slot = (f, mesh.triangle(f as usize));
-                }
-                Tri4::new(&tris[..ids.len()])
-            })
-            .collect();
+        let blocks = HugeArray::collect(leaves.iter().map(|l: &LeafSlots| {
+            let mut tris = [(0u32, [Vec3::ZERO; 3]); wide::MAX_LEAF as usize];
+            let ids = &prims[l.first as usize..(l.first + l.count) as usize];
+            for (slot, &f) in tris.iter_mut().zip(ids) {
+                *slot = (f, mesh.triangle(f as usize));
+            }
+            Tri4::new(&tris[..ids.len()])
+        }));
         // The build's phases (the rays bench times the whole): what to speed up next.
         tracing::debug!(
             triangles = prims.len(),
             binary_ms = binary.as_secs_f64() * 1e3,
             collapse_ms = (collapsed - binary).as_secs_f64() * 1e3,
             blocks_ms = (start.elapsed() - collapsed).as_secs_f64() * 1e3,
+            huge_pages = blocks.mapped(),
             "object BVH built"
         );
         ObjectBvh { bvh, blocks, triangles: prims.len(), bounds: mesh.bounds }

@@ -7,6 +7,7 @@
 //! leaf or an inner node, or its subtree's nodes spread over the `i` slots — so which
 //! binary nodes are opened is chosen by expected cost (area-weighted node and leaf
 //! tests), not greedily by the largest area.
+use super::huge_pages::HugeArray;
 use super::wide::{Bvh8Build, LeafSlots, Node8, EMPTY_NODE, LEAF, MAX_LEAF};
 use obvhs::bvh2::Bvh2;
 
@@ -150,7 +151,7 @@ fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
 pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
     let (counts, order) = counts_and_order(b2);
     let p = plan(b2, &counts, &order);
-    out.bvh.nodes.push(EMPTY_NODE);
+    let mut nodes = vec![EMPTY_NODE];
     // The root as a wide node even when the plan would make it one leaf (a mesh of up to
     // four triangles): traversal starts at an inner node.
     let mut roots = Vec::with_capacity(8);
@@ -180,9 +181,9 @@ pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
                 node.child[i] = LEAF | out.leaves.len() as u32;
                 out.leaves.push(LeafSlots { first, count: out.prims.len() as u32 - first });
             } else {
-                let child = out.bvh.nodes.len();
+                let child = nodes.len();
                 node.child[i] = child as u32;
-                out.bvh.nodes.push(EMPTY_NODE);
+                nodes.push(EMPTY_NODE);
                 let first = b2.nodes[k].first_index as usize;
                 let split = p.split8[k] as usize;
                 let mut grand = Vec::with_capacity(8);
@@ -191,6 +192,7 @@ pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
                 todo.push((child, grand, depth + 1));
             }
         }
-        out.bvh.nodes[at] = node;
+        nodes[at] = node;
     }
+    out.bvh.nodes = HugeArray::collect(nodes.into_iter());
 }

@@ -133,6 +133,9 @@ pub fn build(boxes: &[Aabb]) -> Bvh2 {
         let range = &mut refs[begin..end];
         let split = if n > 1 { best_split(range, &nb, &cb) } else { None };
         let leaf_cost = LEAF_COST * area(&nb) * blocks(n);
+        // The children's box and key bounds, gathered by the partition when it runs (one
+        // pass over the range fewer per level than measuring them after).
+        let mut sides = None;
         let mid = match split {
             _ if n <= MAX_LEAF as usize && split.is_none_or(|s| leaf_cost <= s.2) => {
                 b2.nodes[node].prim_count = n as u32;
@@ -144,25 +147,39 @@ pub fn build(boxes: &[Aabb]) -> Bvh2 {
                 let scale = bin_scale(&cb)[axis];
                 let left = |r: &PrimRef| (((r.key()[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1) < k;
                 let (mut i, mut j) = (0usize, n);
+                let [mut lb, mut lc, mut rb, mut rc] = [Aabb::INVALID; 4];
                 while i < j {
-                    if left(&range[i]) {
+                    let r = range[i];
+                    if left(&r) {
+                        lb = lb.union(&r.bounds);
+                        lc.extend(r.key());
                         i += 1;
                     } else {
+                        rb = rb.union(&r.bounds);
+                        rc.extend(r.key());
                         j -= 1;
                         range.swap(i, j);
                     }
                 }
                 // Both sides hold a primitive (the split has some on each side, binned
                 // the same way); halves if rounding ever disagreed.
-                if i == 0 || i == n { n / 2 } else { i }
+                if i == 0 || i == n {
+                    n / 2
+                } else {
+                    sides = Some([(lb, lc), (rb, rc)]);
+                    i
+                }
             }
             // Every key at one point: halves in index order.
             None => n / 2,
         };
         let first = b2.nodes.len();
         b2.nodes[node].first_index = first as u32;
-        for (lo, hi) in [(begin, begin + mid), (begin + mid, end)] {
-            let (b, c) = bounds(&refs[lo..hi]);
+        for (side, (lo, hi)) in [(begin, begin + mid), (begin + mid, end)].into_iter().enumerate() {
+            let (b, c) = match sides {
+                Some(s) => s[side],
+                None => bounds(&refs[lo..hi]),
+            };
             b2.nodes.push(Bvh2Node { aabb: b, ..Default::default() });
             todo.push((b2.nodes.len() - 1, lo, hi, c));
         }

@@ -17,6 +17,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 #[cfg(test)]
 use super::node_test::Baseline;
+use super::huge_pages::HugeArray;
 use super::node_test::NodeTest;
 
 /// A child slot with nothing in it (its box is empty too, so it is never hit).
@@ -154,7 +155,8 @@ pub(super) fn prefetch<T>(value: &T) {
 
 /// An 8-wide BVH over some primitives; what a leaf payload means is up to the owner.
 pub struct Bvh8 {
-    pub(super) nodes: Vec<Node8>,
+    /// Node 0 is the root (in huge-page-advised memory when large: [`super::huge_pages`]).
+    pub(super) nodes: HugeArray<Node8>,
     /// Levels of nodes (1 for a root whose children are all leaves).
     pub(super) depth: usize,
 }
@@ -181,7 +183,7 @@ impl Bvh8 {
     /// 8-wide nodes with leaves of at most [`MAX_LEAF`] primitives, by surface area
     /// heuristic ([`super::collapse`]). Child boxes are the binary nodes' exact f32 boxes.
     pub fn from_bvh2(b2: &Bvh2) -> Bvh8Build {
-        let mut out = Bvh8Build { bvh: Bvh8 { nodes: Vec::new(), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
+        let mut out = Bvh8Build { bvh: Bvh8 { nodes: HugeArray::collect(std::iter::empty()), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
         if b2.nodes.is_empty() {
             return out;
         }
