@@ -22,13 +22,15 @@
 use super::geometry::Geometry;
 use super::grid::Grid;
 use super::segments::{hide, traces, TraceVis};
-use super::{frame, DiscontinuityMesh, ReceiverMesh, Scratch};
+use super::{arrange, face_backprojections, frame, umbra, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::time::Instant;
 
-/// What one move touched.
+/// What one move touched, and where its time went (CPU nanoseconds summed over threads,
+/// for the benchmark's breakdown; no test looks at them).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct UpdateStats {
     /// Static receivers whose shaft meets the motion volume (looked at).
@@ -37,27 +39,48 @@ pub struct UpdateStats {
     pub receivers_updated: usize,
     /// The moved object's own triangles, recomputed as receivers.
     pub receivers_recomputed: usize,
-    /// Static traces re-intersected with the moved object.
+    /// Static receivers in umbra behind one occluder before or after the move, rebuilt
+    /// from their blockers.
+    pub receivers_rebuilt: usize,
+    /// Static traces re-intersected with the moved object (their surface crosses the
+    /// motion volume).
     pub traces_reintersected: usize,
+    /// Static traces whose surface misses the motion volume (kept as they were).
+    pub traces_untouched: usize,
     /// Dynamic traces recast.
     pub traces_recast: usize,
     pub faces_kept: usize,
     pub faces_recomputed: usize,
+    /// Receivers computed from scratch: the moved object's own, and static ones in or out
+    /// of umbra behind one occluder.
+    pub own_receivers_ns: u64,
+    /// Every receiver's shaft box against the motion volume, and the moved triangles
+    /// against the shafts that meet it.
+    pub scan_ns: u64,
+    /// Static traces re-intersected with the moved object.
+    pub reintersect_ns: u64,
+    /// Dynamic traces recast (traced and intersected with every blocker).
+    pub recast_ns: u64,
+    /// 1D visibility and the arrangement.
+    pub arrangement_ns: u64,
+    /// Face backprojections (kept or redone).
+    pub faces_ns: u64,
+}
+
+macro_rules! add_fields {
+    ($a:ident, $b:ident, $($f:ident),*) => { UpdateStats { $($f: $a.$f + $b.$f),* } };
 }
 
 impl std::ops::Add for UpdateStats {
     type Output = UpdateStats;
     fn add(self, o: UpdateStats) -> UpdateStats {
-        UpdateStats {
-            receivers_in_motion_volume: self.receivers_in_motion_volume + o.receivers_in_motion_volume,
-            receivers_updated: self.receivers_updated + o.receivers_updated,
-            receivers_recomputed: self.receivers_recomputed + o.receivers_recomputed,
-            traces_reintersected: self.traces_reintersected + o.traces_reintersected,
-            traces_recast: self.traces_recast + o.traces_recast,
-            faces_kept: self.faces_kept + o.faces_kept,
-            faces_recomputed: self.faces_recomputed + o.faces_recomputed,
-        }
+        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, traces_reintersected, traces_untouched, traces_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, arrangement_ns, faces_ns)
     }
+}
+
+/// Nanoseconds since `t`.
+fn ns(t: Instant) -> u64 {
+    t.elapsed().as_nanos() as u64
 }
 
 fn object_box(g: &Geometry, o: u32) -> (DVec3, DVec3) {
@@ -79,6 +102,7 @@ impl DiscontinuityMesh {
         let (b0, b1) = (object_box(old, o), object_box(new, o));
         let motion = (b0.0.min(b1.0) - self.tol, b0.1.max(b1.1) + self.tol);
         let tol = self.tol;
+        let only = self.only.as_deref();
         let mut total = UpdateStats::default();
         for (l, light) in self.lights.iter().enumerate() {
             total = total
@@ -88,9 +112,14 @@ impl DiscontinuityMesh {
                     .map_init(Scratch::default, |scratch, (t, slot)| {
                         let t = t as u32;
                         let mut s = UpdateStats::default();
+                        if only.is_some_and(|o| !o[t as usize]) {
+                            return s;
+                        }
                         if moved.contains(&t) {
+                            let t0 = Instant::now();
                             *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
                             s.receivers_recomputed = 1;
+                            s.own_receivers_ns = ns(t0);
                         } else if let Some(m) = slot.as_mut() {
                             if overlap((m.shaft.lo, m.shaft.hi), motion) {
                                 s.receivers_in_motion_volume = 1;
@@ -111,20 +140,39 @@ impl DiscontinuityMesh {
 /// The receiver's mesh after object `o` moved (`g` the new geometry), or `None` when the
 /// object is not among its blockers before or after (nothing changes).
 fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), s: &mut UpdateStats) -> Option<ReceiverMesh> {
+    let t0 = Instant::now();
     let moved = g.object_tris(o);
     let verts = g.object_vertices(o);
     let (receiver, above, shaft) = frame(g, light, m.receiver.tri, m.receiver.tol)?;
     let new_moved: Vec<u32> = moved.clone().filter(|t| super::receiver::is_blocker(g, light, &receiver, &shaft, *t)).collect();
     let had = m.blockers.iter().any(|t| moved.contains(t));
     if !had && new_moved.is_empty() {
+        s.scan_ns += ns(t0);
         return None;
     }
     let mut blockers: Vec<u32> = m.blockers.iter().copied().filter(|t| !moved.contains(t)).chain(new_moved.iter().copied()).collect();
     blockers.sort_unstable();
+    s.scan_ns += ns(t0);
+    // In umbra before (no traces kept) or after the move: decided and built afresh.
+    if m.umbra || umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol).is_some() {
+        let t0 = Instant::now();
+        let mesh = ReceiverMesh::from_blockers(g, light, &above, receiver, shaft, blockers);
+        s.receivers_rebuilt += 1;
+        s.own_receivers_ns += ns(t0);
+        return Some(mesh);
+    }
     // Static traces: re-intersected with the moved object only.
+    let t0 = Instant::now();
     let mut out: Vec<TraceVis> = Vec::with_capacity(m.traces.len());
     for tv in &m.traces {
         if verts.clone().any(|v| tv.trace.generator.uses_vertex(v)) {
+            continue;
+        }
+        // A surface that does not cross the motion volume (paper 002 §4.1) meets the moved
+        // object neither before nor after: its intersection list stays as it is.
+        if !overlap(fan_box(&receiver, &tv.trace), motion) {
+            out.push(tv.clone());
+            s.traces_untouched += 1;
             continue;
         }
         let mut hidden: Vec<(u32, f64, f64)> = tv.hidden.iter().copied().filter(|h| !moved.contains(&h.0)).collect();
@@ -135,17 +183,24 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         out.push(TraceVis { trace: tv.trace, hidden });
         s.traces_reintersected += 1;
     }
+    s.reintersect_ns += ns(t0);
     // Dynamic traces: recast from the moved object's edges and vertices.
+    let t0 = Instant::now();
     let mut fresh = Vec::new();
     traces(g, light, &above, &receiver, &new_moved, &mut fresh);
     s.traces_recast += fresh.len();
     out.extend(fresh.into_iter().map(|t| TraceVis::new(g, &receiver, t, &blockers)));
     super::segments::canonical_order(&mut out);
+    s.recast_ns += ns(t0);
+    let t0 = Instant::now();
+    let (segments, arrangement) = arrange(&receiver, &out);
+    s.arrangement_ns += ns(t0);
     // Faces: keep the backprojection of a face that is still there and whose view of the
     // light the motion volume does not reach.
+    let t0 = Instant::now();
     let old: HashMap<(u64, u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits(), m.arrangement.faces[i].area2.to_bits()), i)).collect();
     let (mut kept, mut redone) = (0, 0);
-    let mesh = ReceiverMesh::assemble(g, light, receiver.clone(), shaft, blockers, out, |point, area2| {
+    let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut |point, area2| {
         let reuse = old.get(&(point.x.to_bits(), point.y.to_bits(), area2.to_bits())).and_then(|i| {
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
@@ -160,11 +215,23 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     });
     s.faces_kept += kept;
     s.faces_recomputed += redone;
-    Some(mesh)
+    s.faces_ns += ns(t0);
+    Some(ReceiverMesh { receiver, shaft, blockers, traces: out, segments, arrangement, faces, umbra: false })
 }
 
-/// Receivers whose incremental mesh differs from the full recomputation's: another
-/// generator set, a segment end farther than `100 × tol`, another face count, or a face
+/// The box of a trace's surface: the fan from its apex over the trace and, for EV, up to
+/// the light edge; every triangle that hides part of the trace meets it.
+fn fan_box(r: &super::receiver::Receiver, t: &super::segments::Trace) -> (DVec3, DVec3) {
+    let (p0, p1) = (r.to3(t.a), r.to3(t.b));
+    let (mut lo, mut hi) = (t.apex.min(p0).min(p1), t.apex.max(p0).max(p1));
+    if let Some((y0, y1)) = t.light_side {
+        (lo, hi) = (lo.min(y0).min(y1), hi.max(y0).max(y1));
+    }
+    (lo, hi)
+}
+
+/// Receivers whose incremental mesh differs from the full recomputation's: in umbra in one
+/// only, another generator set, a segment end farther than `100 × tol`, another face count, or a face
 /// backprojection whose irradiance differs by more than 1e-9 relative.
 pub fn mismatches(a: &DiscontinuityMesh, b: &DiscontinuityMesh) -> usize {
     let mut bad = 0;
@@ -182,7 +249,8 @@ pub fn mismatches(a: &DiscontinuityMesh, b: &DiscontinuityMesh) -> usize {
 }
 
 fn same_mesh(x: &ReceiverMesh, y: &ReceiverMesh, tol: f64) -> bool {
-    x.segments.len() == y.segments.len()
+    x.umbra == y.umbra
+        && x.segments.len() == y.segments.len()
         && x.segments.iter().zip(&y.segments).all(|(s, t)| s.generator == t.generator && s.a.distance(t.a) <= tol && s.b.distance(t.b) <= tol)
         && x.faces.len() == y.faces.len()
         && x.faces.iter().zip(&y.faces).all(|(f, h)| f.point.distance(h.point) <= tol && (f.irradiance - h.irradiance).abs() <= 1e-9 * f.irradiance.abs().max(1e-9))
