@@ -28,8 +28,16 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
     hit.clear();
     let p = r.to3(q).as_vec3();
     let mut vis = Visible::new(light, p, r.n.as_vec3())?;
+    // Only triangles meeting the pyramid from the point to the light can hide any of it: a
+    // box test first spares the clipping of the others (the shaft holds far more).
+    let (apex, base) = vis.pyramid();
+    let (lo, hi) = base.iter().fold((apex, apex), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
     for &t in blockers {
-        if vis.occlude(g.tri(t)) {
+        let tri = g.tri(t);
+        if tri.iter().all(|x| x.x < lo.x) || tri.iter().all(|x| x.x > hi.x) || tri.iter().all(|x| x.y < lo.y) || tri.iter().all(|x| x.y > hi.y) || tri.iter().all(|x| x.z < lo.z) || tri.iter().all(|x| x.z > hi.z) {
+            continue;
+        }
+        if vis.occlude(tri) {
             hit.push(t);
         }
         if vis.is_empty() {

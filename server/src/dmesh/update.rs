@@ -21,7 +21,7 @@
 //! mismatches).
 use super::geometry::Geometry;
 use super::grid::Grid;
-use super::segments::{hide, traces, TraceVis};
+use super::segments::{fan_box, hide_in_box, traces, TraceVis};
 use super::{arrange, face_backprojections, frame, umbra, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
 use glam::DVec3;
@@ -87,6 +87,10 @@ fn object_box(g: &Geometry, o: u32) -> (DVec3, DVec3) {
     g.object_vertices(o).fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), v| (lo.min(g.pos[v as usize]), hi.max(g.pos[v as usize])))
 }
 
+fn pad(b: (DVec3, DVec3), by: f64) -> (DVec3, DVec3) {
+    (b.0 - by, b.1 + by)
+}
+
 fn overlap(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> bool {
     !(a.0.cmpgt(b.1).any() || a.1.cmplt(b.0).any())
 }
@@ -123,7 +127,7 @@ impl DiscontinuityMesh {
                         } else if let Some(m) = slot.as_mut() {
                             if overlap((m.shaft.lo, m.shaft.hi), motion) {
                                 s.receivers_in_motion_volume = 1;
-                                if let Some(u) = update_receiver(m, new, light, o, motion, &mut s) {
+                                if let Some(u) = update_receiver(m, new, light, o, motion, b1, &mut s) {
                                     **m = u;
                                     s.receivers_updated = 1;
                                 }
@@ -139,13 +143,21 @@ impl DiscontinuityMesh {
 
 /// The receiver's mesh after object `o` moved (`g` the new geometry), or `None` when the
 /// object is not among its blockers before or after (nothing changes).
-fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), s: &mut UpdateStats) -> Option<ReceiverMesh> {
+fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), s: &mut UpdateStats) -> Option<ReceiverMesh> {
     let t0 = Instant::now();
     let moved = g.object_tris(o);
     let verts = g.object_vertices(o);
     let (receiver, above, shaft) = frame(g, light, m.receiver.tri, m.receiver.tol)?;
-    let new_moved: Vec<u32> = moved.clone().filter(|t| super::receiver::is_blocker(g, light, &receiver, &shaft, *t)).collect();
-    let had = m.blockers.iter().any(|t| moved.contains(t));
+    // The object's box against the shaft first (most shafts that meet the motion volume
+    // miss the object where it is now), then its triangles one by one.
+    let new_moved: Vec<u32> = if shaft.may_meet_box(new_box, m.receiver.tol) {
+        moved.clone().filter(|t| super::receiver::is_blocker(g, light, &receiver, &shaft, *t)).collect()
+    } else {
+        Vec::new()
+    };
+    // The blockers are sorted and the object's triangles a range.
+    let from = m.blockers.partition_point(|t| *t < moved.start);
+    let had = m.blockers.get(from).is_some_and(|t| moved.contains(t));
     if !had && new_moved.is_empty() {
         s.scan_ns += ns(t0);
         return None;
@@ -170,14 +182,15 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         }
         // A surface that does not cross the motion volume (paper 002 §4.1) meets the moved
         // object neither before nor after: its intersection list stays as it is.
-        if !overlap(fan_box(&receiver, &tv.trace), motion) {
+        let fan = fan_box(&receiver, &tv.trace);
+        if !overlap(fan, motion) {
             out.push(tv.clone());
             s.traces_untouched += 1;
             continue;
         }
         let mut hidden: Vec<(u32, f64, f64)> = tv.hidden.iter().copied().filter(|h| !moved.contains(&h.0)).collect();
         for &t in &new_moved {
-            hide(g, &receiver, &tv.trace, t, &mut hidden);
+            hide_in_box(g, &receiver, &tv.trace, fan, t, &mut hidden);
         }
         hidden.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)));
         out.push(TraceVis { trace: tv.trace, hidden });
@@ -201,10 +214,14 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let old: HashMap<(u64, u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits(), m.arrangement.faces[i].area2.to_bits()), i)).collect();
     let (mut kept, mut redone) = (0, 0);
     let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut |point, area2| {
+        // The moved object hid none of the light from there before (no triangle of it among
+        // the occluders: the visible part is the light less the occluders' shadows) and its
+        // box now misses the box from there to the light: the visible part is the same.
         let reuse = old.get(&(point.x.to_bits(), point.y.to_bits(), area2.to_bits())).and_then(|i| {
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
-            (!overlap((lo, hi), motion)).then(|| m.faces[*i].clone())
+            let f = &m.faces[*i];
+            (!f.occluders.iter().any(|t| moved.contains(t)) && !overlap((lo, hi), pad(new_box, receiver.tol))).then(|| f.clone())
         });
         if reuse.is_some() {
             kept += 1;
@@ -217,17 +234,6 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     s.faces_recomputed += redone;
     s.faces_ns += ns(t0);
     Some(ReceiverMesh { receiver, shaft, blockers, traces: out, segments, arrangement, faces, umbra: false })
-}
-
-/// The box of a trace's surface: the fan from its apex over the trace and, for EV, up to
-/// the light edge; every triangle that hides part of the trace meets it.
-fn fan_box(r: &super::receiver::Receiver, t: &super::segments::Trace) -> (DVec3, DVec3) {
-    let (p0, p1) = (r.to3(t.a), r.to3(t.b));
-    let (mut lo, mut hi) = (t.apex.min(p0).min(p1), t.apex.max(p0).max(p1));
-    if let Some((y0, y1)) = t.light_side {
-        (lo, hi) = (lo.min(y0).min(y1), hi.max(y0).max(y1));
-    }
-    (lo, hi)
 }
 
 /// Receivers whose incremental mesh differs from the full recomputation's: in umbra in one
