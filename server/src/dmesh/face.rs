@@ -7,6 +7,7 @@
 //! every triangle that can hide the light from any point of the face).
 use super::geometry::Geometry;
 use super::receiver::Receiver;
+use super::solid;
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use glam::{DVec2, DVec3};
 
@@ -35,6 +36,9 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
     for &t in blockers {
         let tri = g.tri(t);
         if tri.iter().all(|x| x.x < lo.x) || tri.iter().all(|x| x.x > hi.x) || tri.iter().all(|x| x.y < lo.y) || tri.iter().all(|x| x.y > hi.y) || tri.iter().all(|x| x.z < lo.z) || tri.iter().all(|x| x.z > hi.z) {
+            continue;
+        }
+        if solid::faces_away(g, t, tri, p.as_dvec3()) {
             continue;
         }
         if vis.occlude(tri) {

@@ -129,3 +129,23 @@ pub fn in_own_umbra(g: &Geometry, t: u32, light: &[DVec3], tol: f64) -> bool {
     let (llo, lhi) = light.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), y| (lo.min(*y), hi.max(*y)));
     llo.cmpgt(hi + tol).any() || lhi.cmplt(lo - tol).any()
 }
+
+/// Whether triangle `t` (corners `tri`) of a closed solid faces away from `p`, a point outside
+/// the solid's box: then it hides nothing from `p` that another triangle of the solid does
+/// not hide first — a line from `p` that meets the solid enters it through a face turned
+/// toward `p` before it can leave through this one — and an occlusion test may pass it over.
+pub fn faces_away(g: &Geometry, t: u32, tri: [DVec3; 3], p: DVec3) -> bool {
+    let s = &g.solids;
+    let c = s.component[t as usize];
+    if c == OPEN {
+        return false;
+    }
+    let (lo, hi) = s.boxes[c as usize];
+    if p.cmpge(lo).all() && p.cmple(hi).all() {
+        return false;
+    }
+    let [a, b, q] = tri;
+    let n = (b - a).cross(q - a);
+    let n = if s.outward[t as usize] { n } else { -n };
+    n.dot(p - a) < 0.0
+}
