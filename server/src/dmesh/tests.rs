@@ -38,6 +38,29 @@ fn random_scene(r: &mut Rng) -> (Geometry, LightPlane) {
     (Geometry::from_objects(&objects), LightPlane::new(&light).unwrap())
 }
 
+/// `n` random scenes with their light, and the Cornell box with its.
+fn random_scenes_and_cornell(r: &mut Rng, n: usize) -> Vec<(Geometry, Vec<LightPlane>)> {
+    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..n)
+        .map(|_| {
+            let (g, l) = random_scene(r);
+            (g, vec![l])
+        })
+        .collect();
+    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
+    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    scenes
+}
+
+/// A geometry's objects as [`Geometry::from_objects`] takes them (to add to or change).
+fn objects_of(g: &Geometry) -> Vec<(Vec<DVec3>, Vec<[u32; 3]>)> {
+    (0..g.tri_start.len() as u32)
+        .map(|o| {
+            let base = g.vertex_start[o as usize];
+            (g.object_vertices(o).map(|v| g.pos[v as usize]).collect(), g.object_tris(o).map(|t| g.tris[t as usize].map(|v| v - base)).collect())
+        })
+        .collect()
+}
+
 fn mesh_of(g: &Geometry, light: &LightPlane, tri: u32) -> Option<ReceiverMesh> {
     let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
     ReceiverMesh::compute(g, &grid, light, tri, tolerance(g), &mut Scratch::default())
@@ -289,14 +312,7 @@ fn segments_equal_a_brute_force_enumeration() {
 #[test]
 fn every_receiver_satisfies_eulers_formula() {
     let mut r = Rng::new(11);
-    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..6)
-        .map(|_| {
-            let (g, l) = random_scene(&mut r);
-            (g, vec![l])
-        })
-        .collect();
-    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
-    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    let scenes = random_scenes_and_cornell(&mut r, 6);
     let mut receivers = 0;
     for (g, lights) in &scenes {
         let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
@@ -423,22 +439,10 @@ fn incremental_update_equals_full_recomputation_in_the_cornell_box() {
 #[test]
 fn receivers_culled_in_their_own_umbra_receive_nothing() {
     let mut r = Rng::new(31);
-    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..8)
-        .map(|_| {
-            let (g, l) = random_scene(&mut r);
-            (g, vec![l])
-        })
-        .collect();
-    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
-    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    let mut scenes = random_scenes_and_cornell(&mut r, 8);
     let (g, l) = random_scene(&mut r);
     let tet = g.object_tris(g.tri_start.len() as u32 - 1);
-    let mut objects: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = (0..g.tri_start.len() as u32)
-        .map(|o| {
-            let base = g.vertex_start[o as usize];
-            (g.object_vertices(o).map(|v| g.pos[v as usize]).collect(), g.object_tris(o).map(|t| g.tris[t as usize].map(|v| v - base)).collect())
-        })
-        .collect();
+    let mut objects = objects_of(&g);
     objects.last_mut().unwrap().1.iter_mut().for_each(|t| t.swap(1, 2));
     let flipped = Geometry::from_objects(&objects);
     assert!(tet.clone().all(|t| flipped.solids.outward[t as usize] != g.solids.outward[t as usize]));
@@ -564,12 +568,7 @@ fn receivers_in_umbra_behind_one_occluder_receive_nothing() {
     let mut r = Rng::new(37);
     for _ in 0..6 {
         let (g, l) = random_scene(&mut r);
-        let mut objects: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = (0..g.tri_start.len() as u32)
-            .map(|o| {
-                let base = g.vertex_start[o as usize];
-                (g.object_vertices(o).map(|v| g.pos[v as usize]).collect(), g.object_tris(o).map(|t| g.tris[t as usize].map(|v| v - base)).collect())
-            })
-            .collect();
+        let mut objects = objects_of(&g);
         let y = 0.3 + 0.5 * r.f64();
         objects.push((vec![DVec3::new(-1.5, y, -1.5), DVec3::new(1.5, y, -1.5), DVec3::new(0.0, y + 0.1, 1.5)], vec![[0, 1, 2]]));
         scenes.push((Geometry::from_objects(&objects), vec![l], 1));
