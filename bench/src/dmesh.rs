@@ -9,7 +9,7 @@ use anyhow::Result;
 use edgepoint_server::dmesh::geometry::Geometry;
 use edgepoint_server::dmesh::grid::Grid;
 use edgepoint_server::dmesh::update::mismatches;
-use edgepoint_server::dmesh::{area_lights, point_lights_as_squares, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
+use edgepoint_server::dmesh::{area_lights, point_lights_as_squares, tolerance, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
 use edgepoint_server::rng::Rng;
 use edgepoint_server::reference::LogProgress;
 use serde_json::json;
@@ -45,6 +45,11 @@ pub struct DmeshArgs {
     /// Seed of the random moves.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Mesh every N-th triangle only as a receiver (all still block), in the full
+    /// computations and the updates alike, for scenes too large to mesh whole in a short run
+    /// (grid-dragon); 1 meshes every triangle.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub receiver_stride: u32,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -70,13 +75,14 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         anyhow::bail!("{} has no area light (and --point-light-size 0 adds none)", a.scene);
     }
     let g = Geometry::from_scene(&scene);
+    let only = (a.receiver_stride > 1).then(|| (0..g.tris.len() as u32).map(|t| t.is_multiple_of(a.receiver_stride)).collect::<Vec<bool>>());
     let (mut times, mut grid_ms) = (Vec::new(), Vec::new());
     let mut last = None;
     for _ in 0..a.repeat.max(1) {
         let t = Instant::now();
         let grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
         grid_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        let mesh = DiscontinuityMesh::compute(&g, &grid, &lights);
+        let mesh = DiscontinuityMesh::compute_for(&g, &grid, &lights, tolerance(&g), only.clone());
         times.push(t.elapsed().as_secs_f64() * 1e3);
         last = Some((grid, mesh));
     }
@@ -121,7 +127,8 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         let ti = t.elapsed().as_secs_f64() * 1e3;
         g = new;
         let t = Instant::now();
-        let full = DiscontinuityMesh::compute(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights);
+        // With the mesh's tolerance (fixed when it was made; the scene's bounds may have grown).
+        let full = DiscontinuityMesh::compute_for(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights, mesh.tol, mesh.only.clone());
         let tf = t.elapsed().as_secs_f64() * 1e3;
         let m = mismatches(&mesh, &full);
         bad += m;
@@ -130,8 +137,15 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         moves.push(json!({
             "incremental_ms": ti, "full_ms": tf, "speedup": tf / ti, "mismatches": m,
             "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
-            "receivers_recomputed": stats.receivers_recomputed, "traces_reintersected": stats.traces_reintersected,
+            "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "traces_reintersected": stats.traces_reintersected,
+            "traces_untouched": stats.traces_untouched,
             "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
+            // CPU time of the update's parts, summed over threads.
+            "cpu_ms": {
+                "own_receivers": stats.own_receivers_ns as f64 / 1e6, "scan": stats.scan_ns as f64 / 1e6,
+                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6,
+                "arrangement": stats.arrangement_ns as f64 / 1e6, "faces": stats.faces_ns as f64 / 1e6,
+            },
         }));
     }
     let (si, sf) = (incr_ms.iter().sum::<f64>(), full_after_ms.iter().sum::<f64>());
@@ -167,6 +181,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         "geometry_bytes": geometry_bytes,
         "intersection_list_bytes": intersection_bytes,
         "point_lights_as_squares": from_points,
+        "receiver_stride": a.receiver_stride,
         "moved_object": scene.objects[object as usize].name,
         "moved_object_triangles": scene.objects[object as usize].mesh.triangles.len(),
         "moves": moves,

@@ -7,6 +7,7 @@
 //! every triangle that can hide the light from any point of the face).
 use super::geometry::Geometry;
 use super::receiver::Receiver;
+use super::solid;
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use glam::{DVec2, DVec3};
 
@@ -28,8 +29,19 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
     hit.clear();
     let p = r.to3(q).as_vec3();
     let mut vis = Visible::new(light, p, r.n.as_vec3())?;
+    // Only triangles meeting the pyramid from the point to the light can hide any of it: a
+    // box test first spares the clipping of the others (the shaft holds far more).
+    let (apex, base) = vis.pyramid();
+    let (lo, hi) = base.iter().fold((apex, apex), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
     for &t in blockers {
-        if vis.occlude(g.tri(t)) {
+        let tri = g.tri(t);
+        if tri.iter().all(|x| x.x < lo.x) || tri.iter().all(|x| x.x > hi.x) || tri.iter().all(|x| x.y < lo.y) || tri.iter().all(|x| x.y > hi.y) || tri.iter().all(|x| x.z < lo.z) || tri.iter().all(|x| x.z > hi.z) {
+            continue;
+        }
+        if solid::faces_away(g, t, tri, p.as_dvec3()) {
+            continue;
+        }
+        if vis.occlude(tri) {
             hit.push(t);
         }
         if vis.is_empty() {

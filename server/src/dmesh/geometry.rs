@@ -3,6 +3,7 @@
 //! triangles in f64 with welded vertex ids, and the adjacency the generators need — the
 //! triangles around each edge (is it a silhouette from a light vertex?) and the neighbours
 //! of each vertex (is a plane through it tangent to its object?).
+use super::solid::Solids;
 use edgepoint_scene::Scene;
 use glam::DVec3;
 use std::collections::HashMap;
@@ -34,6 +35,8 @@ pub struct Geometry {
     pub edge_tris: HashMap<EdgeKey, Vec<u32>>,
     /// Neighbour vertices of each vertex (over its triangles), sorted, no repeats.
     pub neighbours: Vec<Vec<u32>>,
+    /// The closed components and their boxes (receivers in their own umbra).
+    pub solids: Solids,
 }
 
 impl Geometry {
@@ -79,7 +82,8 @@ impl Geometry {
             n.sort_unstable();
             n.dedup();
         }
-        Geometry { pos, tris, object, vertex_start, tri_start, edge_tris, neighbours }
+        let solids = Solids::new(&pos, &tris, &edge_tris);
+        Geometry { pos, tris, object, vertex_start, tri_start, edge_tris, neighbours, solids }
     }
 
     /// The corners of triangle `t`.
@@ -102,12 +106,14 @@ impl Geometry {
     }
 
     /// The same scene with object `o`'s vertices mapped by `f` (ids, triangles and adjacency
-    /// unchanged: a rigid move keeps the topology).
+    /// unchanged: a rigid move keeps the topology; no mirroring, which would turn its solids
+    /// inside out).
     pub fn moved(&self, o: u32, f: impl Fn(DVec3) -> DVec3) -> Geometry {
         let mut g = self.clone();
         for v in self.object_vertices(o) {
             g.pos[v as usize] = f(self.pos[v as usize]);
         }
+        g.solids.update_boxes(&g.pos, &g.tris, g.object_tris(o));
         g
     }
 

@@ -19,6 +19,8 @@ pub mod geometry;
 pub mod grid;
 pub mod receiver;
 pub mod segments;
+pub mod solid;
+pub mod umbra;
 pub mod update;
 
 use arrangement::Arrangement;
@@ -47,18 +49,37 @@ pub struct ReceiverMesh {
     pub arrangement: Arrangement,
     /// One per bounded face of the arrangement.
     pub faces: Vec<FaceBackprojection>,
+    /// Wholly in umbra behind one flat occluder ([`umbra`]): no traces, one dark face.
+    pub umbra: bool,
 }
 
 impl ReceiverMesh {
     /// The mesh of `light` on triangle `tri`; `None` when no part of the light is above the
-    /// triangle's plane (it receives nothing) or the triangle is degenerate.
+    /// triangle's plane, the triangle is in the umbra of its own solid ([`solid`]) — it
+    /// receives nothing — or it is degenerate.
     pub fn compute(g: &Geometry, grid: &Grid, light: &LightPlane, tri: u32, tol: f64, scratch: &mut Scratch) -> Option<ReceiverMesh> {
         let (receiver, above, shaft) = frame(g, light, tri, tol)?;
         let mut blockers = Vec::new();
         receiver::shaft_blockers(g, grid, light, &receiver, &shaft, &mut blockers, &mut scratch.stamp, &mut scratch.epoch);
         blockers.sort_unstable();
-        let traces = segments::receiver_traces(g, light, &above, &receiver, &blockers);
-        Some(ReceiverMesh::assemble(g, light, receiver, shaft, blockers, traces, |_, _| None))
+        Some(ReceiverMesh::from_blockers(g, light, &above, receiver, shaft, blockers))
+    }
+
+    /// The mesh from the receiver's blockers: in umbra behind one of them, or traced.
+    pub fn from_blockers(g: &Geometry, light: &LightPlane, above: &LightAbove, receiver: Receiver, shaft: Shaft, blockers: Vec<u32>) -> ReceiverMesh {
+        if let Some(occluder) = umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol) {
+            return ReceiverMesh::in_umbra(receiver, shaft, blockers, occluder);
+        }
+        let traces = segments::receiver_traces(g, light, above, &receiver, &blockers);
+        ReceiverMesh::assemble(g, light, receiver, shaft, blockers, traces, |_, _| None)
+    }
+
+    /// A receiver hidden from the whole light by `occluder`: the triangle is one face that
+    /// sees nothing.
+    fn in_umbra(receiver: Receiver, shaft: Shaft, blockers: Vec<u32>, occluder: Vec<u32>) -> ReceiverMesh {
+        let arrangement = arrangement::build(&receiver.corners, &[], receiver.tol);
+        let faces = (0..arrangement.faces.len()).map(|f| FaceBackprojection { point: arrangement.interior_point(f), pieces: Vec::new(), occluders: occluder.clone(), irradiance: 0.0 }).collect();
+        ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), segments: Vec::new(), arrangement, faces, umbra: true }
     }
 
     /// The segments, arrangement and face backprojections from the traces; `reuse` may give
@@ -72,18 +93,9 @@ impl ReceiverMesh {
         traces: Vec<TraceVis>,
         mut reuse: impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
     ) -> ReceiverMesh {
-        let mut segments = Vec::new();
-        for t in &traces {
-            t.visible(&receiver, &mut segments);
-        }
-        let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
-        let faces = (0..arrangement.faces.len())
-            .map(|f| {
-                let point = arrangement.interior_point(f);
-                reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| FaceBackprojection::compute(g, light, &receiver, &blockers, point))
-            })
-            .collect();
-        ReceiverMesh { receiver, shaft, blockers, traces, segments, arrangement, faces }
+        let (segments, arrangement) = arrange(&receiver, &traces);
+        let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut reuse);
+        ReceiverMesh { receiver, shaft, blockers, traces, segments, arrangement, faces, umbra: false }
     }
 
     /// Irradiance per unit radiance at receiver point `q` (receiver frame), from the
@@ -103,14 +115,43 @@ impl ReceiverMesh {
     }
 }
 
+/// 1D visibility on every trace and the arrangement of the visible segments.
+pub fn arrange(receiver: &Receiver, traces: &[TraceVis]) -> (Vec<Segment>, Arrangement) {
+    let mut segments = Vec::new();
+    for t in traces {
+        t.visible(receiver, &mut segments);
+    }
+    let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
+    (segments, arrangement)
+}
+
+/// One backprojection per bounded face of `arrangement`, from `reuse` (an old face's, by
+/// interior point and area) or computed.
+pub fn face_backprojections(
+    g: &Geometry,
+    light: &LightPlane,
+    receiver: &Receiver,
+    blockers: &[u32],
+    arrangement: &Arrangement,
+    reuse: &mut impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
+) -> Vec<FaceBackprojection> {
+    (0..arrangement.faces.len())
+        .map(|f| {
+            let point = arrangement.interior_point(f);
+            reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| FaceBackprojection::compute(g, light, receiver, blockers, point))
+        })
+        .collect()
+}
+
 /// The receiver's frame, the light above its plane and the shaft.
 pub fn frame(g: &Geometry, light: &LightPlane, tri: u32, tol: f64) -> Option<(Receiver, LightAbove, Shaft)> {
     let centre = light.corners.iter().map(|q| light.lift(*q)).sum::<DVec3>() / light.corners.len() as f64;
     let receiver = Receiver::new(g, tri, centre, tol)?;
     let above = LightAbove::new(light, &receiver)?;
     let [a, b, c] = g.tri(tri);
-    // Wholly behind the (one-sided) light: nothing reaches it.
-    if [a, b, c].iter().all(|p| light.height(*p) <= tol) {
+    // Wholly behind the (one-sided) light, or in the umbra of its own solid: nothing
+    // reaches it.
+    if [a, b, c].iter().all(|p| light.height(*p) <= tol) || solid::in_own_umbra(g, tri, &above.corners, tol) {
         return None;
     }
     let shaft = Shaft::new(&above.clipped, &[a, b, c], tol);
@@ -131,6 +172,8 @@ pub struct DiscontinuityMesh {
     /// `meshes[l][t]`: the mesh of light `l` on triangle `t`, if the light reaches it.
     pub meshes: Vec<Vec<Option<Box<ReceiverMesh>>>>,
     pub tol: f64,
+    /// The receivers meshed, when not every triangle ([`DiscontinuityMesh::compute_for`]).
+    pub only: Option<Vec<bool>>,
 }
 
 /// The area lights of a scene as light planes (point and spot lights have no mesh).
@@ -179,17 +222,42 @@ impl DiscontinuityMesh {
     /// The full computation over every light and every triangle, in parallel over
     /// receivers.
     pub fn compute(g: &Geometry, grid: &Grid, lights: &[LightPlane]) -> DiscontinuityMesh {
-        let tol = tolerance(g);
+        DiscontinuityMesh::compute_with_tolerance(g, grid, lights, tolerance(g))
+    }
+
+    /// The full computation with a given length tolerance. A mesh keeps the tolerance it
+    /// was made with through its updates (it is part of what the mesh is: where ends snap,
+    /// where a trace stops above the receiver's plane), whereas [`tolerance`] follows the
+    /// scene's bounds, which a moved object can widen; a full recomputation to compare an
+    /// updated mesh with takes the mesh's `tol`.
+    pub fn compute_with_tolerance(g: &Geometry, grid: &Grid, lights: &[LightPlane], tol: f64) -> DiscontinuityMesh {
+        DiscontinuityMesh::compute_for(g, grid, lights, tol, None)
+    }
+
+    /// The mesh on the receivers `only` marks (every triangle for `None`; every triangle
+    /// still blocks): for scenes too large to mesh whole in a test or a short benchmark run.
+    /// Updates keep to the same receivers.
+    pub fn compute_for(g: &Geometry, grid: &Grid, lights: &[LightPlane], tol: f64, only: Option<Vec<bool>>) -> DiscontinuityMesh {
         let meshes = lights
             .iter()
             .map(|light| {
                 (0..g.tris.len() as u32)
                     .into_par_iter()
-                    .map_init(Scratch::default, |s, t| ReceiverMesh::compute(g, grid, light, t, tol, s).map(Box::new))
+                    .map_init(Scratch::default, |s, t| {
+                        if only.as_ref().is_some_and(|o| !o[t as usize]) {
+                            return None;
+                        }
+                        ReceiverMesh::compute(g, grid, light, t, tol, s).map(Box::new)
+                    })
                     .collect()
             })
             .collect();
-        DiscontinuityMesh { lights: lights.to_vec(), meshes, tol }
+        DiscontinuityMesh { lights: lights.to_vec(), meshes, tol, only }
+    }
+
+    /// Whether triangle `t` is one of the receivers meshed.
+    pub fn meshes_receiver(&self, t: u32) -> bool {
+        self.only.as_ref().is_none_or(|o| o[t as usize])
     }
 
     /// Every receiver mesh of every light.

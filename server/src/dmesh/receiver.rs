@@ -174,6 +174,15 @@ impl Shaft {
         Shaft { lo: lo - tol, hi: hi + tol, planes }
     }
 
+    /// Whether the box `(lo, hi)` may meet the shaft (no plane has all its corners outside).
+    pub fn may_meet_box(&self, (lo, hi): (DVec3, DVec3), tol: f64) -> bool {
+        if lo.cmpgt(self.hi).any() || hi.cmplt(self.lo).any() {
+            return false;
+        }
+        let corners = (0..8).map(|k| DVec3::new(if k & 1 == 0 { lo.x } else { hi.x }, if k & 2 == 0 { lo.y } else { hi.y }, if k & 4 == 0 { lo.z } else { hi.z }));
+        !self.planes.iter().any(|(n, d)| corners.clone().all(|x| n.dot(x) > *d + tol))
+    }
+
     /// Whether triangle `p` may meet the shaft (no plane has it wholly outside).
     pub fn may_meet(&self, p: &[DVec3; 3], tol: f64) -> bool {
         let (tlo, thi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));

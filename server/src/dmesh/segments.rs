@@ -313,13 +313,31 @@ pub struct TraceVis {
     pub hidden: Vec<(u32, f64, f64)>,
 }
 
+/// The box of a trace's surface: the fan from its apex over the trace and, for EV, up to
+/// the light edge; every triangle that hides part of the trace meets it.
+pub fn fan_box(r: &Receiver, t: &Trace) -> (DVec3, DVec3) {
+    let (p0, p1) = (r.to3(t.a), r.to3(t.b));
+    let (mut lo, mut hi) = (t.apex.min(p0).min(p1), t.apex.max(p0).max(p1));
+    if let Some((y0, y1)) = t.light_side {
+        (lo, hi) = (lo.min(y0).min(y1), hi.max(y0).max(y1));
+    }
+    (lo, hi)
+}
+
 /// Appends the intervals of `trace` that triangle `t` hides (none for its own triangles).
 pub fn hide(g: &Geometry, r: &Receiver, trace: &Trace, t: u32, out: &mut Vec<(u32, f64, f64)>) {
-    if is_own(g, &trace.generator, t) {
+    hide_in_box(g, r, trace, fan_box(r, trace), t, out);
+}
+
+/// [`hide`] with the trace's [`fan_box`] given: a triangle missing it (by more than the
+/// tolerance) meets no part of the fan and is passed over before any plane test.
+pub fn hide_in_box(g: &Geometry, r: &Receiver, trace: &Trace, (lo, hi): (DVec3, DVec3), t: u32, out: &mut Vec<(u32, f64, f64)>) {
+    let tri = g.tri(t);
+    let (tlo, thi) = (tri[0].min(tri[1]).min(tri[2]), tri[0].max(tri[1]).max(tri[2]));
+    if tlo.cmpgt(hi + r.tol).any() || thi.cmplt(lo - r.tol).any() || is_own(g, &trace.generator, t) {
         return;
     }
     let (p0, p1) = (r.to3(trace.a), r.to3(trace.b));
-    let tri = g.tri(t);
     let c = trace.apex;
     match trace.light_side {
         // VE: the fan from the light corner, short of it by `LIGHT_GAP` (the light's own
@@ -345,8 +363,9 @@ impl TraceVis {
     /// The trace with every blocker intersected.
     pub fn new(g: &Geometry, r: &Receiver, trace: Trace, blockers: &[u32]) -> TraceVis {
         let mut hidden = Vec::new();
+        let fan = fan_box(r, &trace);
         for &t in blockers {
-            hide(g, r, &trace, t, &mut hidden);
+            hide_in_box(g, r, &trace, fan, t, &mut hidden);
         }
         hidden.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)));
         TraceVis { trace, hidden }

@@ -38,6 +38,29 @@ fn random_scene(r: &mut Rng) -> (Geometry, LightPlane) {
     (Geometry::from_objects(&objects), LightPlane::new(&light).unwrap())
 }
 
+/// `n` random scenes with their light, and the Cornell box with its.
+fn random_scenes_and_cornell(r: &mut Rng, n: usize) -> Vec<(Geometry, Vec<LightPlane>)> {
+    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..n)
+        .map(|_| {
+            let (g, l) = random_scene(r);
+            (g, vec![l])
+        })
+        .collect();
+    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
+    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    scenes
+}
+
+/// A geometry's objects as [`Geometry::from_objects`] takes them (to add to or change).
+fn objects_of(g: &Geometry) -> Vec<(Vec<DVec3>, Vec<[u32; 3]>)> {
+    (0..g.tri_start.len() as u32)
+        .map(|o| {
+            let base = g.vertex_start[o as usize];
+            (g.object_vertices(o).map(|v| g.pos[v as usize]).collect(), g.object_tris(o).map(|t| g.tris[t as usize].map(|v| v - base)).collect())
+        })
+        .collect()
+}
+
 fn mesh_of(g: &Geometry, light: &LightPlane, tri: u32) -> Option<ReceiverMesh> {
     let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
     ReceiverMesh::compute(g, &grid, light, tri, tolerance(g), &mut Scratch::default())
@@ -289,14 +312,7 @@ fn segments_equal_a_brute_force_enumeration() {
 #[test]
 fn every_receiver_satisfies_eulers_formula() {
     let mut r = Rng::new(11);
-    let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..6)
-        .map(|_| {
-            let (g, l) = random_scene(&mut r);
-            (g, vec![l])
-        })
-        .collect();
-    let cornell = edgepoint_scene::builtin::load("cornell").unwrap();
-    scenes.push((Geometry::from_scene(&cornell), area_lights(&cornell)));
+    let scenes = random_scenes_and_cornell(&mut r, 6);
     let mut receivers = 0;
     for (g, lights) in &scenes {
         let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
@@ -353,7 +369,9 @@ fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[
         let new = random_move(&g, o, &mut r, step, 0.4, pivot);
         let stats = mesh.move_object(&g, &new, &mut grid, o);
         g = new;
-        let full = DiscontinuityMesh::compute(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights);
+        // With the mesh's own tolerance: it is fixed when the mesh is made, while
+        // `tolerance(&g)` follows the scene's bounds, which a move can change.
+        let full = DiscontinuityMesh::compute_with_tolerance(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights, mesh.tol);
         assert_eq!(update::mismatches(&mesh, &full), 0, "move {i} of object {o}: {stats:?}");
         assert_eq!(mesh.segment_count(), full.segment_count());
         updated += stats.receivers_updated;
@@ -361,32 +379,47 @@ fn incremental_equals_full(mut g: Geometry, lights: Vec<LightPlane>, objects: &[
     updated
 }
 
-/// Random scenes moved about `pivot`; returns the receivers updated.
-fn random_scenes_incremental_equals_full(pivot: Pivot) -> usize {
-    let mut r = Rng::new(5);
+/// `scenes` random scenes (from `seed`), each object moved 6 times about `pivot` by up to
+/// `step` per axis and 0.4 rad; returns the receivers updated.
+fn random_scenes_incremental_equals_full(pivot: Pivot, scenes: u64, seed: u64, step: f64) -> usize {
+    let mut r = Rng::new(seed);
     let mut updated = 0;
-    for k in 0..5 {
+    for k in 0..scenes {
         let (g, light) = random_scene(&mut r);
         let objects: Vec<u32> = (1..g.vertex_start.len() as u32).collect();
-        updated += incremental_equals_full(g, vec![light], &objects, 6, 0.3, 100 + k, pivot);
+        updated += incremental_equals_full(g, vec![light], &objects, 6, step, seed * 1000 + 100 + k, pivot);
     }
     updated
 }
 
 #[test]
 fn incremental_update_equals_full_recomputation_on_random_scenes() {
-    let updated = random_scenes_incremental_equals_full(Pivot::Mean);
+    let updated = random_scenes_incremental_equals_full(Pivot::Mean, 5, 5, 0.3);
     assert!(updated > 10, "{updated} receivers updated");
 }
 
-/// The same random scenes and moves turned about each object's box centre instead: the
-/// third move of object 1 in one of them leaves one receiver different from a full
-/// recomputation (found while folding the benchmark's and the tests' moves into one; not
-/// yet understood — README, "What is not done yet").
+/// The same random scenes and moves turned about each object's box centre (the benchmark's
+/// pivot). These moves once left one receiver different from a full recomputation: the
+/// object left the scene's bounds, the full recomputation took its tolerance from the
+/// grown bounds and the updated mesh kept the one it was made with, so a trace's end where a
+/// blocker edge dips through the receiver's plane moved by 10⁻¹⁰ and a thin contact-shadow
+/// face's irradiance by 8·10⁻⁹ of itself.
 #[test]
-#[ignore = "known defect: incremental ≠ full on one receiver (README, What is not done yet)"]
 fn incremental_update_equals_full_recomputation_with_moves_about_the_box_centre() {
-    random_scenes_incremental_equals_full(Pivot::BoxCentre);
+    let updated = random_scenes_incremental_equals_full(Pivot::BoxCentre, 5, 5, 0.3);
+    assert!(updated > 10, "{updated} receivers updated");
+}
+
+/// Harder: 24 more random scenes per pivot, and moves twice as far (objects leave the
+/// scene's bounds, pass through the floor and each other, turn about either pivot).
+#[test]
+fn incremental_update_equals_full_recomputation_on_many_random_scenes_and_moves() {
+    let mut updated = 0;
+    for (pivot, seed) in [(Pivot::Mean, 17), (Pivot::BoxCentre, 23)] {
+        updated += random_scenes_incremental_equals_full(pivot, 12, seed, 0.3);
+        updated += random_scenes_incremental_equals_full(pivot, 12, seed + 1, 0.6);
+    }
+    assert!(updated > 100, "{updated} receivers updated");
 }
 
 #[test]
@@ -397,4 +430,181 @@ fn incremental_update_equals_full_recomputation_in_the_cornell_box() {
     assert!(!boxes.is_empty(), "{:?}", scene.objects.iter().map(|o| &o.name).collect::<Vec<_>>());
     let updated = incremental_equals_full(g, area_lights(&scene), &boxes, 6, 30.0, 9, Pivot::Mean);
     assert!(updated > 0);
+}
+
+/// Receivers culled as in the umbra of their own solid receive nothing: at random points of
+/// each, the pointwise backprojection with every other triangle of the scene sees none of
+/// the light. Random scenes (their tetrahedra wound either way), the Cornell box and a
+/// tetrahedron turned inside out (its winding reversed: the other faces are culled).
+#[test]
+fn receivers_culled_in_their_own_umbra_receive_nothing() {
+    let mut r = Rng::new(31);
+    let mut scenes = random_scenes_and_cornell(&mut r, 8);
+    let (g, l) = random_scene(&mut r);
+    let tet = g.object_tris(g.tri_start.len() as u32 - 1);
+    let mut objects = objects_of(&g);
+    objects.last_mut().unwrap().1.iter_mut().for_each(|t| t.swap(1, 2));
+    let flipped = Geometry::from_objects(&objects);
+    assert!(tet.clone().all(|t| flipped.solids.outward[t as usize] != g.solids.outward[t as usize]));
+    scenes.push((g, vec![l.clone()]));
+    scenes.push((flipped, vec![l]));
+    let (mut culled, mut points) = (0, 0);
+    for (g, lights) in &scenes {
+        let tol = tolerance(g);
+        for light in lights {
+            let corners: Vec<DVec3> = light.corners.iter().map(|q| light.lift(*q)).collect();
+            let centre = corners.iter().sum::<DVec3>() / corners.len() as f64;
+            for t in 0..g.tris.len() as u32 {
+                if !solid::in_own_umbra(g, t, &corners, tol) {
+                    continue;
+                }
+                culled += 1;
+                let rc = receiver::Receiver::new(g, t, centre, tol).unwrap();
+                let [a, b, c] = g.tri(t);
+                let free = Visible::new(light, ((a + b + c) / 3.0).as_vec3(), rc.n.as_vec3()).map_or(0.0, |v| v.irradiance());
+                for _ in 0..20 {
+                    let (u, v) = (0.02 + 0.96 * r.f64(), 0.02 + 0.96 * r.f64());
+                    let (u, v) = if u + v > 0.98 { (0.98 - u, 0.98 - v) } else { (u, v) };
+                    let (u, v) = (u.max(0.01), v.max(0.01));
+                    let p = a + (b - a) * u + (c - a) * v;
+                    let e = Visible::new(light, p.as_vec3(), rc.n.as_vec3()).map_or(0.0, |mut vis| {
+                        for o in (0..g.tris.len() as u32).filter(|o| *o != t) {
+                            vis.occlude(g.tri(o));
+                        }
+                        vis.irradiance()
+                    });
+                    assert!(e <= 1e-9 * free.max(1e-12), "triangle {t}: {e} of {free}");
+                    points += 1;
+                }
+            }
+        }
+    }
+    assert!(culled > 20, "{culled} receivers culled, {points} points");
+}
+
+/// The receivers of the scene tests: the triangles whose centroid lies in the moved object's
+/// box grown by `grow` of its diagonal on every side (the receivers its moves can reach),
+/// every k-th of them so that at most `cap` remain.
+fn receivers_near(g: &Geometry, o: u32, grow: f64, cap: usize) -> Vec<bool> {
+    let (lo, hi) = g.object_bounds(o);
+    let pad = DVec3::splat(grow * (hi - lo).length());
+    let near: Vec<u32> = (0..g.tris.len() as u32)
+        .filter(|t| {
+            let [a, b, c] = g.tri(*t);
+            let m = (a + b + c) / 3.0;
+            m.cmpge(lo - pad).all() && m.cmple(hi + pad).all()
+        })
+        .collect();
+    let stride = near.len().div_ceil(cap).max(1);
+    let mut only = vec![false; g.tris.len()];
+    near.iter().step_by(stride).for_each(|t| only[*t as usize] = true);
+    only
+}
+
+/// A built-in scene's area lights and, as in the benchmark, 5 %-of-the-diagonal squares for
+/// its point lights; `moves` random moves of object `name` about each pivot (up to 0.1 of
+/// its diagonal per axis and 0.2 rad), each checked against a full recomputation on the
+/// same receivers ([`receivers_near`]); returns the receivers updated.
+fn scene_incremental_equals_full(scene: &edgepoint_scene::Scene, name: &str, grow: f64, cap: usize, moves: usize, seed: u64) -> usize {
+    let mut lights = area_lights(scene);
+    let (lo, hi) = scene.bounds();
+    lights.extend(point_lights_as_squares(scene, 0.05 * (hi - lo).length() as f64));
+    let o = scene.object_id(name).unwrap_or_else(|| panic!("{} has no {name}", scene.name));
+    let mut g = Geometry::from_scene(scene);
+    let only = receivers_near(&g, o, grow, cap);
+    let mut grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
+    let mut mesh = DiscontinuityMesh::compute_for(&g, &grid, &lights, tolerance(&g), Some(only));
+    let mut r = Rng::new(seed);
+    let mut updated = 0;
+    for i in 0..2 * moves {
+        let pivot = if i % 2 == 0 { Pivot::Mean } else { Pivot::BoxCentre };
+        let (olo, ohi) = g.object_bounds(o);
+        let new = random_move(&g, o, &mut r, 0.1 * (ohi - olo).length(), 0.2, pivot);
+        let stats = mesh.move_object(&g, &new, &mut grid, o);
+        g = new;
+        let full = DiscontinuityMesh::compute_for(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights, mesh.tol, mesh.only.clone());
+        assert_eq!(update::mismatches(&mesh, &full), 0, "{}: move {i} of {name}: {stats:?}", scene.name);
+        updated += stats.receivers_updated;
+    }
+    assert!(mesh.segment_count() > 0, "{}: no segments on the receivers tested", scene.name);
+    updated
+}
+
+#[test]
+fn incremental_update_equals_full_recomputation_in_rooms() {
+    let scene = edgepoint_scene::builtin::load("rooms").unwrap();
+    let updated = scene_incremental_equals_full(&scene, "ball4", 1.0, 400, 2, 41);
+    assert!(updated > 5, "{updated} receivers updated");
+}
+
+#[test]
+fn incremental_update_equals_full_recomputation_in_chains() {
+    let scene = edgepoint_scene::builtin::load("chains").unwrap();
+    let updated = scene_incremental_equals_full(&scene, "chain1-link3", 0.5, 400, 2, 43);
+    assert!(updated > 5, "{updated} receivers updated");
+}
+
+/// Needs the shared data's dragon (skipped, saying so, without it).
+#[test]
+fn incremental_update_equals_full_recomputation_on_the_grid_over_the_dragon() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if !edgepoint_scene::builtin::data_files("grid-dragon").iter().all(|f| data.join(f).exists()) {
+        eprintln!("skipping grid-dragon: {} not found", data.display());
+        return;
+    }
+    let scene = edgepoint_scene::data::load_builtin("grid-dragon", Some(&data), &edgepoint_scene::NoProgress).unwrap();
+    let updated = scene_incremental_equals_full(&scene, "grid", 0.3, 400, 2, 47);
+    assert!(updated > 5, "{updated} receivers updated");
+}
+
+/// Receivers found in umbra behind one flat occluder see none of the light: at random points
+/// of each, the pointwise backprojection with every other triangle of the scene is dark.
+/// `rooms` (every 40th triangle as a receiver, six lights: the other rooms' lights are seen
+/// through walls) and random scenes with a large triangle laid over the floor.
+#[test]
+fn receivers_in_umbra_behind_one_occluder_receive_nothing() {
+    let rooms = edgepoint_scene::builtin::load("rooms").unwrap();
+    let mut scenes = vec![(Geometry::from_scene(&rooms), area_lights(&rooms), 40u32)];
+    let mut r = Rng::new(37);
+    for _ in 0..6 {
+        let (g, l) = random_scene(&mut r);
+        let mut objects = objects_of(&g);
+        let y = 0.3 + 0.5 * r.f64();
+        objects.push((vec![DVec3::new(-1.5, y, -1.5), DVec3::new(1.5, y, -1.5), DVec3::new(0.0, y + 0.1, 1.5)], vec![[0, 1, 2]]));
+        scenes.push((Geometry::from_objects(&objects), vec![l], 1));
+    }
+    let (mut culled, mut checked) = (0, 0);
+    for (g, lights, stride) in &scenes {
+        let only: Vec<bool> = (0..g.tris.len() as u32).map(|t| t % stride == 0).collect();
+        let mesh = DiscontinuityMesh::compute_for(g, &Grid::build(g, GRID_TRIANGLES_PER_VOXEL), lights, tolerance(g), Some(only));
+        for (light, meshes) in lights.iter().zip(&mesh.meshes) {
+            for m in meshes.iter().flatten().filter(|m| m.umbra) {
+                culled += 1;
+                if culled % 4 != 0 && *stride > 1 {
+                    continue; // a quarter of rooms' is enough
+                }
+                let t = m.receiver.tri;
+                let [a, b, c] = g.tri(t);
+                for _ in 0..3 {
+                    let (u, v) = (0.05 + 0.9 * r.f64(), 0.05 + 0.9 * r.f64());
+                    let (u, v) = if u + v > 0.95 { (0.95 - u, 0.95 - v) } else { (u, v) };
+                    let p = a + (b - a) * u.max(0.02) + (c - a) * v.max(0.02);
+                    let e = Visible::new(light, p.as_vec3(), m.receiver.n.as_vec3()).map_or(0.0, |mut vis| {
+                        for o in (0..g.tris.len() as u32).filter(|o| *o != t) {
+                            vis.occlude(g.tri(o));
+                            if vis.is_empty() {
+                                break;
+                            }
+                        }
+                        vis.irradiance()
+                    });
+                    // Slivers of rounding where two triangles of a quadrilateral meet.
+                    let free = Visible::new(light, p.as_vec3(), m.receiver.n.as_vec3()).map_or(0.0, |v| v.irradiance());
+                    assert!(e <= 1e-9 * free, "triangle {t} at {p}: in umbra, yet sees {e} of {free}");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(culled > 50 && checked > 100, "{culled} receivers in umbra, {checked} points");
 }
