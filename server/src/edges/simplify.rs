@@ -442,11 +442,15 @@ impl<'a> SceneLights<'a> {
         (penumbra / slant).max(POINT_BAND * dist)
     }
 
-    /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1`;
-    /// `None` when no receiver face is found under it or it has no length. With `cull`,
-    /// lights that cannot reach the band are skipped ([`reach`]; the estimate is the same).
-    pub fn edge_error(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3, rules: &Rules, how: Estimate, culls: &mut Culls) -> Option<f64> {
-        let band = self.edge_band(e, k, s0, s1)?;
+    /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1` (a
+    /// [`Job`]); `None` when no receiver face is found under it, it has no length or its
+    /// light is not in the scene. See [`Self::band_error`] for `how`.
+    pub fn edge_error(&self, (e, k, s0, s1): &Job, rules: &Rules, how: Estimate, culls: &mut Culls) -> Option<f64> {
+        let k = *k as usize;
+        if k >= self.lights.len() {
+            return None;
+        }
+        let band = self.edge_band(e, k, *s0, *s1)?;
         Some(self.band_error(&band, k, rules, how, culls))
     }
 
@@ -516,10 +520,9 @@ pub fn jobs(store: &ShadowStore, transforms: &[Affine3A]) -> Vec<Job> {
 pub fn estimate(scene: &SceneLights, jobs: &[Job], rules: &Rules, how: Estimate) -> (Vec<f64>, Culls) {
     let out: Vec<(f64, Culls)> = jobs
         .par_iter()
-        .map(|(e, l, s0, s1)| {
+        .map(|job| {
             let mut c = Culls::default();
-            let err = if (*l as usize) < scene.lights() { scene.edge_error(e, *l as usize, *s0, *s1, rules, how, &mut c) } else { None };
-            (err.unwrap_or(f64::INFINITY), c)
+            (scene.edge_error(job, rules, how, &mut c).unwrap_or(f64::INFINITY), c)
         })
         .collect();
     let mut culls = Culls::default();
