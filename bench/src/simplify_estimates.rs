@@ -1,10 +1,11 @@
 //! `edgepoint-bench simplify --estimates`: paper 003's estimates alone, in this process (no
 //! session, no workers). The scene's shadow edges from the triples a shader would report
 //! (surface points ray-cast to the lights, as `edges --scene` samples them), every edge
-//! estimated with the culls of lights that cannot reach its band; then `--compare` edges
-//! spread over the set estimated again without the culls, both timed on the pool (CPU time
-//! of the process), and the largest difference between the two estimates; and the same
-//! with the other lights bounded where not comparable (a different estimate: its largest
+//! estimated with the culls of lights that cannot reach its band, closed meshes' exit faces
+//! and the bounds; then `--compare` edges spread over the set estimated again with every
+//! face and nothing skipped, with exit faces only, and with the culls too, all timed on the
+//! pool (CPU time of the process), with the largest differences from the first; and the
+//! same with the other lights bounded where not comparable (a different estimate: its largest
 //! relative difference, and how many decisions at the tolerance it changes).
 use crate::clock::process_cpu_ms;
 use anyhow::Result;
@@ -35,29 +36,32 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
     let view = ViewVolume::new(&scene.camera, 1.0);
     let mut out: Vec<EdgeSegment> = Vec::new();
     finder.frame(&t, scene.camera.eye, Some(&view), triples.iter().copied(), 85.0, &mut out);
-    let (lights, transforms) = finder.scene_lights();
+    let (mut lights, transforms) = finder.scene_lights();
     let all = jobs(finder.store(), transforms);
     let rules = Rules::new();
 
-    let timed = |js: &[_], how: Estimate| {
+    let mut timed = |js: &[_], how: Estimate, exit_faces: bool| {
+        lights.exit_faces = exit_faces;
         let (w, c) = (Instant::now(), process_cpu_ms());
         let (e, culls) = estimate(&lights, js, &rules, how);
         (e, culls, w.elapsed().as_secs_f64() * 1e3, process_cpu_ms() - c)
     };
-    let (errs, culls, all_ms, all_cpu) = timed(&all, Estimate::FAST);
+    let (errs, culls, all_ms, all_cpu) = timed(&all, Estimate::FAST, true);
     let kept = errs.iter().filter(|e| **e >= tolerance).count();
 
     // Every k-th edge, so the subset spans every light and receiver: fast, culls only,
     // neither.
     let step = (all.len() / compare.max(1)).max(1);
     let sub: Vec<_> = all.iter().step_by(step).take(compare).copied().collect();
-    let (fast, sub_culls, fast_ms, fast_cpu) = timed(&sub, Estimate::FAST);
-    let (with, _, with_ms, with_cpu) = timed(&sub, Estimate { cull: true, bounded: false });
-    let (without, _, without_ms, without_cpu) = timed(&sub, Estimate::FULL);
+    let (fast, sub_culls, fast_ms, fast_cpu) = timed(&sub, Estimate::FAST, true);
+    let (with, _, with_ms, with_cpu) = timed(&sub, Estimate { cull: true, bounded: false }, true);
+    let (exits, _, _, exits_cpu) = timed(&sub, Estimate::FULL, true);
+    let (without, _, without_ms, without_cpu) = timed(&sub, Estimate::FULL, false);
     let differ = |x: &[f64]| {
         x.iter().zip(&without).map(|(a, b)| if a == b { 0.0 } else { (a - b).abs() / b.abs().max(1e-300) }).fold(0.0f64, f64::max)
     };
     let worst = differ(&with);
+    let worst_exits = differ(&exits);
     let worst_bounded = differ(&fast);
     let flips = fast.iter().zip(&without).filter(|(a, b)| (**a >= tolerance) != (**b >= tolerance)).count();
     let v = json!({
@@ -76,6 +80,9 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
         "fast_speedup_cpu": if fast_cpu > 0.0 { json!(without_cpu / fast_cpu) } else { Value::Null },
         "bounded_max_relative_difference": worst_bounded,
         "bounded_decisions_changed": flips,
+        "exit_faces_cpu_ms": exits_cpu,
+        "exit_faces_speedup_cpu": if exits_cpu > 0.0 { json!(without_cpu / exits_cpu) } else { Value::Null },
+        "exit_faces_max_relative_difference": worst_exits,
         "culled_ms": with_ms,
         "culled_cpu_ms": with_cpu,
         "unculled_ms": without_ms,
@@ -85,7 +92,7 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
     });
     let table = format!(
         "simplify estimates {}: {} shadow edges, estimated in {:.0} ms ({:.0} ms CPU), {} kept at {}; culls of {} (band, light) pairs: {} facing away, {} behind, {} blocked\n\
-         {} edges with / without culls: {:.0} / {:.0} ms CPU ({:.2}x), largest relative difference {:e}; with the other lights bounded too {:.0} ms CPU ({:.2}x), largest relative difference {:.3}, {} decisions at {} changed\n",
+         {} edges, every face / exit faces / and culls / and bounds: {:.0} / {:.0} / {:.0} / {:.0} ms CPU ({:.2}x / {:.2}x / {:.2}x); largest relative difference of the exit faces {:e}, of the culls {:e}, of the bounds {:.3}, {} decisions at {} changed\n",
         scene.name,
         all.len(),
         all_ms,
@@ -97,12 +104,15 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
         culls.behind,
         culls.blocked,
         sub.len(),
-        with_cpu,
         without_cpu,
-        without_cpu / with_cpu.max(1e-9),
-        worst,
+        exits_cpu,
+        with_cpu,
         fast_cpu,
+        without_cpu / exits_cpu.max(1e-9),
+        without_cpu / with_cpu.max(1e-9),
         without_cpu / fast_cpu.max(1e-9),
+        worst_exits,
+        worst,
         worst_bounded,
         flips,
         tolerance

@@ -296,6 +296,9 @@ pub struct SceneLights<'a> {
     bvhs: &'a [FaceBvh],
     to_world: Vec<DAffine3>,
     to_object: Vec<DAffine3>,
+    /// Closed, consistently oriented meshes block through their exit faces alone (the same
+    /// irradiance with half the faces); off only to compare.
+    pub exit_faces: bool,
 }
 
 impl<'a> SceneLights<'a> {
@@ -314,6 +317,7 @@ impl<'a> SceneLights<'a> {
             to_object: to_world.iter().map(|t| t.inverse()).collect(),
             to_world,
             bvhs,
+            exit_faces: true,
         }
     }
 
@@ -332,10 +336,20 @@ impl<'a> SceneLights<'a> {
                 let (apex, base) = (apex, base.to_vec());
                 for o in 0..self.bvhs.len() {
                     let (w, to) = (&self.to_world[o], &self.to_object[o]);
-                    let planes = pyramid_planes(to.transform_point3(apex), &base.iter().map(|b| to.transform_point3(*b)).collect::<Vec<_>>());
+                    let p = to.transform_point3(apex);
+                    let planes = pyramid_planes(p, &base.iter().map(|b| to.transform_point3(*b)).collect::<Vec<_>>());
+                    // Only the faces that have the point behind their plane, where the
+                    // mesh allows it ([`FaceBvh::oriented`], the light outside its box).
+                    let exits = self.exit_faces && self.bvhs[o].oriented && self.light_outside(k, o);
                     let go = self.bvhs[o].visit(
                         |lo, hi| box_meets(&planes, lo, hi),
                         |f: &Face| {
+                            if exits {
+                                let [a, b, c] = f.v.map(|v| v.as_dvec3());
+                                if (b - a).cross(c - a).dot(p - a) >= 0.0 {
+                                    return true;
+                                }
+                            }
                             vis.occlude(f.v.map(|v| w.transform_point3(v.as_dvec3())));
                             !vis.is_empty()
                         },
@@ -348,6 +362,15 @@ impl<'a> SceneLights<'a> {
             }
             Light::Point { .. } | Light::Spot { .. } => self.point_light(k, x, n, true),
         }
+    }
+
+    /// Whether light `k` lies wholly outside object `o`'s box (then outside the object):
+    /// all its points beyond one side of the box, in the object's space.
+    fn light_outside(&self, k: usize, o: usize) -> bool {
+        let Some(root) = &self.bvhs[o].root else { return true };
+        let (lo, hi) = (DVec3::from(root.lo.map(f64::from)), DVec3::from(root.hi.map(f64::from)));
+        let pts: Vec<DVec3> = self.light_points(k).iter().map(|x| self.to_object[o].transform_point3(*x)).collect();
+        (0..3).any(|i| pts.iter().all(|x| x[i] < lo[i]) || pts.iter().all(|x| x[i] > hi[i]))
     }
 
     /// Light `k`'s irradiance at `x` (unit normal `n`) with nothing in the way: an upper

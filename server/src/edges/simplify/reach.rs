@@ -52,7 +52,7 @@ const SEGMENT_MARGIN: f64 = 1e-3;
 
 impl SceneLights<'_> {
     /// The light's corners (an area light) or its position.
-    fn light_points(&self, k: usize) -> Vec<DVec3> {
+    pub(super) fn light_points(&self, k: usize) -> Vec<DVec3> {
         match &self.lights[k] {
             Light::Area { vertices, .. } => vertices.iter().map(|v| v.as_dvec3()).collect(),
             Light::Point { position, .. } | Light::Spot { position, .. } => vec![position.as_dvec3()],

@@ -331,17 +331,17 @@ fn random_band(r: &mut crate::rng::Rng) -> Band {
 
 /// `scenes` random [`two_rooms`] with `bands` random bands each: `f(lights, band, k, rng)`
 /// for a random light k of the scene.
-fn for_random_bands(seed: u64, scenes: usize, bands: usize, mut f: impl FnMut(&SceneLights, &Band, usize, &mut crate::rng::Rng)) {
+fn for_random_bands(seed: u64, scenes: usize, bands: usize, mut f: impl FnMut(&mut SceneLights, &Band, usize, &mut crate::rng::Rng)) {
     let mut r = crate::rng::Rng::new(seed);
     for _ in 0..scenes {
         let scene = two_rooms(&mut r);
         let bvhs: Vec<FaceBvh> = scene.objects.iter().map(|o| FaceBvh::build(&o.mesh, &NoProgress)).collect();
         let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
-        let lights = SceneLights::new(&scene.lights, &bvhs, &t);
+        let mut lights = SceneLights::new(&scene.lights, &bvhs, &t);
         for _ in 0..bands {
             let band = random_band(&mut r);
             let k = r.below(scene.lights.len());
-            f(&lights, &band, k, &mut r);
+            f(&mut lights, &band, k, &mut r);
         }
     }
 }
@@ -393,4 +393,45 @@ fn convex_hull_of_a_square_and_points_inside() {
     let h = convex_hull(p);
     assert_eq!(h.len(), 4, "{h:?}");
     assert!((edgepoint_scene::polyclip::signed_area2(&h) - 8.0).abs() < 1e-12, "{h:?}");
+}
+
+/// Closed meshes wound outward block through their exit faces alone: the irradiance of every
+/// light at random points of random bands (on the floor, the wall, anywhere: some inside a
+/// box) is the one with every face, and the exit faces are used (the boxes and the wall).
+#[test]
+fn exit_faces_of_closed_meshes_hide_what_all_faces_hide() {
+    let mut shadowed = 0;
+    for_random_bands(41, 30, 10, |lights, band, _k, r| {
+        assert!(lights.bvhs.iter().skip(1).all(|b| b.oriented), "the wall and the boxes are closed and wound outward");
+        for _ in 0..10 {
+            let x = band.point(r.f64(), 2.0 * r.f64() - 1.0);
+            for j in 0..lights.lights() {
+                lights.exit_faces = true;
+                let fast = lights.irradiance(j, x, band.normal);
+                lights.exit_faces = false;
+                let all = lights.irradiance(j, x, band.normal);
+                assert!((fast - all).abs() <= 1e-9 * lights.weights[j], "light {j} at {x}: {fast} against {all}");
+                shadowed += usize::from(all < lights.unoccluded(j, x, band.normal) * (1.0 - 1e-6));
+            }
+        }
+    });
+    assert!(shadowed >= 100, "only {shadowed} shadowed points");
+}
+
+/// A box is closed and wound outward; with one face turned over, or one face missing, or
+/// turned inside out, it is not.
+#[test]
+fn orientation_of_closed_meshes() {
+    let m = cuboid(Vec3::ZERO, Vec3::ONE);
+    assert!(crate::edges::face_bvh::consistently_oriented(&m.triangles));
+    assert!(FaceBvh::build(&m, &NoProgress).oriented);
+    let mut flipped = m.triangles.clone();
+    flipped[3].swap(1, 2);
+    assert!(!crate::edges::face_bvh::consistently_oriented(&flipped));
+    assert!(!crate::edges::face_bvh::consistently_oriented(&m.triangles[1..]));
+    let mut inside_out = m.clone();
+    inside_out.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+    assert!(crate::edges::face_bvh::consistently_oriented(&inside_out.triangles));
+    let parts = edgepoint_scene::builtin::shapes::Parts { positions: inside_out.positions.clone(), triangles: inside_out.triangles.clone() };
+    assert!(!FaceBvh::build(&parts.mesh(), &NoProgress).oriented, "inside out");
 }
