@@ -63,6 +63,7 @@ mod rays;
 mod requests;
 mod reference_cache;
 mod simplify;
+mod simplify_estimates;
 mod speedup;
 mod split;
 mod stats;

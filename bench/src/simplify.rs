@@ -17,6 +17,17 @@ pub struct SimplifyArgs {
     /// relative L2 error of leaving them out is below it are left out (paper 003).
     #[arg(long, value_name = "T", default_value_t = 0.05)]
     pub tolerance: f64,
+    /// Time the estimates alone in this process instead of running sessions: the scene's
+    /// shadow edges from sampled triples, estimated with the culls of lights that cannot
+    /// reach a band, and a subset again without them (same estimates, compared).
+    #[arg(long)]
+    pub estimates: bool,
+    /// With --estimates: edges estimated both with and without the culls.
+    #[arg(long, value_name = "N", default_value_t = 300)]
+    pub compare: usize,
+    /// With --estimates: surface points per object for the triples.
+    #[arg(long, value_name = "N", default_value_t = 4000)]
+    pub triple_points: usize,
 }
 
 fn shadow_edges(r: &Value) -> u64 {
@@ -33,6 +44,13 @@ pub fn run(args: SimplifyArgs) -> Result<()> {
     }
     if f.reconstruction.simplify_tolerance.is_some() {
         bail!("give the tolerance as --tolerance (the first session runs at 0)");
+    }
+    if args.estimates {
+        let scene = edgepoint_scene::data::load_builtin(&f.scene.scene, f.scene.data_dir.as_deref(), &edgepoint_scene::NoProgress)
+            .map_err(anyhow::Error::msg)?;
+        let (v, table) = crate::simplify_estimates::run(scene, &f.scene.scene, args.triple_points, args.compare, args.tolerance)?;
+        crate::emit(f.json, &v, &table);
+        return Ok(());
     }
     let source = scene_source_from_arg_in(&f.scene.scene, f.scene.data_dir.as_deref())?;
     let cluster = start_cluster(&f.scene)?;

@@ -82,6 +82,32 @@ pub struct FaceBvh {
     /// The mesh is closed (no boundary edge): the first surface a ray from outside meets
     /// faces it, so faces turned away from the light can never bound a shadow or hide one.
     pub closed: bool,
+    /// Closed and wound outward: every directed edge's reverse belongs to exactly one other
+    /// face, and the signed volume is positive. A segment from a point outside the mesh or
+    /// on it to a point outside that meets its inside leaves it through a face that has
+    /// the segment's start behind its plane, so those faces alone hide what all hide.
+    pub oriented: bool,
+}
+
+/// Whether every directed edge (a, b) of `triangles` occurs once and its reverse (b, a)
+/// once (a closed mesh whose faces all wind the same way about its inside).
+pub fn consistently_oriented(triangles: &[[u32; 3]]) -> bool {
+    let mut directed: Vec<(u32, u32)> = triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+    directed.sort_unstable();
+    if directed.windows(2).any(|w| w[0] == w[1]) {
+        return false;
+    }
+    directed.iter().all(|&(a, b)| directed.binary_search(&(b, a)).is_ok())
+}
+
+/// Six times the signed volume enclosed by the mesh's faces (positive when wound outward).
+fn signed_volume(mesh: &Mesh) -> f64 {
+    (0..mesh.triangles.len())
+        .map(|f| {
+            let [a, b, c] = mesh.triangle(f).map(|v| v.as_dvec3());
+            a.dot(b.cross(c))
+        })
+        .sum()
 }
 
 const LEAF: usize = 8;
@@ -125,7 +151,8 @@ impl FaceBvh {
             .par_iter()
             .map(|it| Face { v: mesh.triangle(it.face as usize), n: mesh.face_normals[it.face as usize], id: it.face })
             .collect();
-        FaceBvh { nodes, normals, root, faces, closed: mesh.boundary_edges() == 0 }
+        let closed = mesh.boundary_edges() == 0;
+        FaceBvh { nodes, normals, root, faces, closed, oriented: closed && consistently_oriented(&mesh.triangles) && signed_volume(mesh) > 0.0 }
     }
 
     /// Visits the faces of every leaf whose box `overlaps` accepts (a region query: the

@@ -13,7 +13,7 @@ use super::events::VertexRings;
 use super::face_bvh::FaceBvh;
 use super::geometric::{MeshEdgeTrees, SharpTree};
 use super::shadow::{ShadowScene, ShadowStore, ShadowUpdateStats};
-use super::simplify::EdgeErrors;
+use super::simplify::{EdgeErrors, SceneLights};
 use super::{EdgeCounts, EdgeKind, EdgeSegment};
 use crate::edges::TripleKey;
 use edgepoint_scene::{Camera, Light, Mesh, Progress, Scene};
@@ -366,6 +366,11 @@ impl ShadowFinder {
         errors.update(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
     }
 
+    /// The scene as paper 003's estimate sees it, and the transforms, of the last update.
+    pub fn scene_lights(&self) -> (SceneLights<'_>, &[Affine3A]) {
+        (SceneLights::new(&self.lights, &self.index.bvhs, &self.transforms), &self.transforms)
+    }
+
     /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
     pub fn estimates_missing(&self, errors: &EdgeErrors) -> bool {
         errors.missing(&self.store, &self.lights, &self.transforms)
@@ -464,6 +469,11 @@ impl EdgeFinder {
     /// The shadow store (for inspection and benchmarks).
     pub fn store(&self) -> &ShadowStore {
         self.shadows.store()
+    }
+
+    /// See [`ShadowFinder::scene_lights`].
+    pub fn scene_lights(&self) -> (SceneLights<'_>, &[Affine3A]) {
+        self.shadows.scene_lights()
     }
 
     /// See [`ShadowFinder::errors`].

@@ -116,6 +116,11 @@ impl Band {
     pub fn point(&self, s: f64, t: f64) -> DVec3 {
         self.a + (self.b - self.a) * s + self.across * (t * self.half_width)
     }
+
+    /// The parallelogram's four corners.
+    pub fn corners(&self) -> [DVec3; 4] {
+        [self.point(0.0, -1.0), self.point(1.0, -1.0), self.point(1.0, 1.0), self.point(0.0, 1.0)]
+    }
 }
 
 /// Paper 003's estimate for an edge of light `light` over `band`: the RMS, over the band,
@@ -123,38 +128,125 @@ impl Band {
 /// sides, over the band's mean total irradiance of all `lights`. `irradiance(k, x, n)` is
 /// light k's irradiance at x (unit normal n). 0 where nothing differs (or no light at all
 /// reaches the band and its sides), infinite where the sides are lit but the band is not.
-pub fn washout_error(band: &Band, light: usize, lights: usize, rule: &[(f64, f64)], mut irradiance: impl FnMut(usize, DVec3, DVec3) -> f64) -> f64 {
+pub fn washout_error(band: &Band, light: usize, lights: usize, rule: &[(f64, f64)], irradiance: impl FnMut(usize, DVec3, DVec3) -> f64) -> f64 {
+    washout(band, light, lights, rule, None::<&mut fn(usize, DVec3, DVec3) -> f64>, irradiance)
+}
+
+/// Where an upper bound of the other lights' mean over the band (their irradiance with
+/// nothing in the way) is at most this fraction of the edge's own light's mean, the other
+/// lights are not evaluated: their mean lies between 0 and the bound, and taking half the
+/// bound puts the estimate within half this fraction of the full one (relative). Such an
+/// estimate is large anyway (a shadow with little other light: near the lone values
+/// 0.38–0.58), far above useful tolerances.
+pub const COMPARABLE: f64 = 0.1;
+
+/// [`washout_error`], skipping the other lights where none is comparable ([`COMPARABLE`]):
+/// `bound(k, x, n)` is an upper bound of light k's irradiance (the light with nothing in the
+/// way), far cheaper than the exact value. Within `COMPARABLE / 2` (relative) of the full
+/// estimate, and equal to it where the other lights are comparable. Where the own light's
+/// deviation is 0 nothing else is evaluated (the estimate is 0 whatever the others give).
+pub fn washout_error_bounded(
+    band: &Band,
+    light: usize,
+    lights: usize,
+    rule: &[(f64, f64)],
+    irradiance: impl FnMut(usize, DVec3, DVec3) -> f64,
+    bound: impl FnMut(usize, DVec3, DVec3) -> f64,
+) -> f64 {
+    washout(band, light, lights, rule, Some(&mut { bound }), irradiance)
+}
+
+fn washout<B: FnMut(usize, DVec3, DVec3) -> f64>(
+    band: &Band,
+    light: usize,
+    lights: usize,
+    rule: &[(f64, f64)],
+    bound: Option<&mut B>,
+    mut irradiance: impl FnMut(usize, DVec3, DVec3) -> f64,
+) -> f64 {
     let n = band.normal;
-    let [sq, total] = integrate(rule, 0.0, 1.0, |s| {
-        let lo = irradiance(light, band.point(s, -1.0), n);
-        let hi = irradiance(light, band.point(s, 1.0), n);
-        let mut across = |t: f64| {
-            let x = band.point(s, t);
-            let mut all = 0.0;
-            let mut own = 0.0;
-            for k in 0..lights {
-                let e = irradiance(k, x, n);
-                all += e;
-                if k == light {
-                    own = e;
-                }
-            }
+    // ∫ f over the band by `rule` along the edge and on each half across it (the edge is at
+    // t = 0: a step there is integrated exactly); `side(s)` is computed once per node s.
+    fn halves<S: Copy>(rule: &[(f64, f64)], mut side: impl FnMut(f64) -> S, mut f: impl FnMut(f64, f64, S) -> [f64; 2]) -> [f64; 2] {
+        integrate(rule, 0.0, 1.0, |s| {
+            let v = side(s);
+            let [a0, a1] = integrate(rule, -1.0, 0.0, |t| f(s, t, v));
+            let [b0, b1] = integrate(rule, 0.0, 1.0, |t| f(s, t, v));
+            [a0 + b0, a1 + b1]
+        })
+    }
+    let irr = std::cell::RefCell::new(&mut irradiance);
+    let e = |k: usize, x: DVec3| (irr.borrow_mut())(k, x, n);
+    let [sq, own] = halves(
+        rule,
+        |s| (e(light, band.point(s, -1.0)), e(light, band.point(s, 1.0))),
+        |s, t, (lo, hi)| {
+            let v = e(light, band.point(s, t));
             let lin = lo + (hi - lo) * 0.5 * (t + 1.0);
-            [(own - lin) * (own - lin), all]
-        };
-        // The edge is at t = 0: each half on its own, so a step there is integrated exactly.
-        let [a0, a1] = integrate(rule, -1.0, 0.0, &mut across);
-        let [b0, b1] = integrate(rule, 0.0, 1.0, &mut across);
-        [a0 + b0, a1 + b1]
-    });
+            [(v - lin) * (v - lin), v]
+        },
+    );
     // The band's measure in (s, t) is 2.
-    let (rms, mean_total) = ((sq / 2.0).max(0.0).sqrt(), total / 2.0);
+    let rms = (sq / 2.0).max(0.0).sqrt();
     if rms == 0.0 {
-        0.0
-    } else if mean_total > 0.0 {
+        return 0.0;
+    }
+    let own_mean = own / 2.0;
+    let others = |x: DVec3| (0..lights).filter(|j| *j != light).map(|j| e(j, x)).sum::<f64>();
+    let full = || halves(rule, |_| (), |s, t, ()| [others(band.point(s, t)), 0.0])[0] / 2.0;
+    let others_mean = match bound {
+        Some(bound) if lights > 1 => {
+            // The same rule over the bounds: the full estimate's mean of the others lies in
+            // [0, b] (positive weights, pointwise 0 ≤ exact ≤ bound).
+            let b = halves(rule, |_| (), |s, t, ()| {
+                let x = band.point(s, t);
+                [(0..lights).filter(|j| *j != light).map(|j| bound(j, x, n)).sum(), 0.0]
+            })[0] / 2.0;
+            if b <= COMPARABLE * own_mean {
+                0.5 * b
+            } else {
+                full()
+            }
+        }
+        _ => full(),
+    };
+    let mean_total = own_mean + others_mean;
+    if mean_total > 0.0 {
         rms / mean_total
     } else {
         f64::INFINITY
+    }
+}
+
+/// The quadrature rule of the estimate: [`ORDER`] points on each half band.
+#[derive(Debug, Clone, Default)]
+pub struct Rules {
+    pub full: Vec<(f64, f64)>,
+}
+
+impl Rules {
+    pub fn new() -> Rules {
+        Rules { full: gauss_legendre(ORDER) }
+    }
+}
+
+/// How the estimate is made: both on in sessions; off to compare.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Estimate {
+    /// Skip lights that cannot reach the band ([`reach`]: the same estimate).
+    pub cull: bool,
+    /// Other lights that are not comparable bounded, not evaluated ([`washout_error_bounded`]).
+    pub bounded: bool,
+}
+
+impl Estimate {
+    pub const FAST: Estimate = Estimate { cull: true, bounded: true };
+    pub const FULL: Estimate = Estimate { cull: false, bounded: false };
+}
+
+impl Default for Estimate {
+    fn default() -> Estimate {
+        Estimate::FAST
     }
 }
 
@@ -204,6 +296,9 @@ pub struct SceneLights<'a> {
     bvhs: &'a [FaceBvh],
     to_world: Vec<DAffine3>,
     to_object: Vec<DAffine3>,
+    /// Closed, consistently oriented meshes block through their exit faces alone (the same
+    /// irradiance with half the faces); off only to compare.
+    pub exit_faces: bool,
 }
 
 impl<'a> SceneLights<'a> {
@@ -222,6 +317,7 @@ impl<'a> SceneLights<'a> {
             to_object: to_world.iter().map(|t| t.inverse()).collect(),
             to_world,
             bvhs,
+            exit_faces: true,
         }
     }
 
@@ -240,10 +336,20 @@ impl<'a> SceneLights<'a> {
                 let (apex, base) = (apex, base.to_vec());
                 for o in 0..self.bvhs.len() {
                     let (w, to) = (&self.to_world[o], &self.to_object[o]);
-                    let planes = pyramid_planes(to.transform_point3(apex), &base.iter().map(|b| to.transform_point3(*b)).collect::<Vec<_>>());
+                    let p = to.transform_point3(apex);
+                    let planes = pyramid_planes(p, &base.iter().map(|b| to.transform_point3(*b)).collect::<Vec<_>>());
+                    // Only the faces that have the point behind their plane, where the
+                    // mesh allows it ([`FaceBvh::oriented`], the light outside its box).
+                    let exits = self.exit_faces && self.bvhs[o].oriented && self.light_outside(k, o);
                     let go = self.bvhs[o].visit(
                         |lo, hi| box_meets(&planes, lo, hi),
                         |f: &Face| {
+                            if exits {
+                                let [a, b, c] = f.v.map(|v| v.as_dvec3());
+                                if (b - a).cross(c - a).dot(p - a) >= 0.0 {
+                                    return true;
+                                }
+                            }
                             vis.occlude(f.v.map(|v| w.transform_point3(v.as_dvec3())));
                             !vis.is_empty()
                         },
@@ -254,22 +360,45 @@ impl<'a> SceneLights<'a> {
                 }
                 vis.irradiance() * self.weights[k]
             }
-            Light::Point { position, .. } | Light::Spot { position, .. } => {
-                let to_light = position.as_dvec3() - x;
-                let r2 = to_light.length_squared();
-                let cos = n.dot(to_light) / r2.sqrt();
-                if cos.is_nan() || cos <= 0.0 || !self.sees(x, position.as_dvec3()) {
-                    return 0.0;
-                }
-                let cone = match &self.lights[k] {
-                    Light::Spot { direction, cos_inner, cos_outer, .. } => {
-                        spot_falloff(*direction, *cos_inner, *cos_outer, (-to_light / r2.sqrt()).as_vec3()) as f64
-                    }
-                    _ => 1.0,
-                };
-                self.weights[k] * cone * cos / r2
-            }
+            Light::Point { .. } | Light::Spot { .. } => self.point_light(k, x, n, true),
         }
+    }
+
+    /// Whether light `k` lies wholly outside object `o`'s box (then outside the object):
+    /// all its points beyond one side of the box, in the object's space.
+    fn light_outside(&self, k: usize, o: usize) -> bool {
+        let Some(root) = &self.bvhs[o].root else { return true };
+        let (lo, hi) = (DVec3::from(root.lo.map(f64::from)), DVec3::from(root.hi.map(f64::from)));
+        let pts: Vec<DVec3> = self.light_points(k).iter().map(|x| self.to_object[o].transform_point3(*x)).collect();
+        (0..3).any(|i| pts.iter().all(|x| x[i] < lo[i]) || pts.iter().all(|x| x[i] > hi[i]))
+    }
+
+    /// Light `k`'s irradiance at `x` (unit normal `n`) with nothing in the way: an upper
+    /// bound of [`Self::irradiance`], by Lambert's formula or the point light's law alone.
+    pub fn unoccluded(&self, k: usize, x: DVec3, n: DVec3) -> f64 {
+        match &self.lights[k] {
+            Light::Area { .. } => {
+                let Some(plane) = &self.planes[k] else { return 0.0 };
+                Visible::new(plane, x.as_vec3(), n.as_vec3()).map_or(0.0, |v| v.irradiance() * self.weights[k])
+            }
+            Light::Point { .. } | Light::Spot { .. } => self.point_light(k, x, n, false),
+        }
+    }
+
+    /// A point or spot light's irradiance at `x`, through the shadow ray when `shadowed`.
+    fn point_light(&self, k: usize, x: DVec3, n: DVec3, shadowed: bool) -> f64 {
+        let (Light::Point { position, .. } | Light::Spot { position, .. }) = &self.lights[k] else { return 0.0 };
+        let to_light = position.as_dvec3() - x;
+        let r2 = to_light.length_squared();
+        let cos = n.dot(to_light) / r2.sqrt();
+        if cos.is_nan() || cos <= 0.0 || (shadowed && !self.sees(x, position.as_dvec3())) {
+            return 0.0;
+        }
+        let cone = match &self.lights[k] {
+            Light::Spot { direction, cos_inner, cos_outer, .. } => spot_falloff(*direction, *cos_inner, *cos_outer, (-to_light / r2.sqrt()).as_vec3()) as f64,
+            _ => 1.0,
+        };
+        self.weights[k] * cone * cos / r2
     }
 
     /// Whether nothing lies on the segment from `x` to `light` (a shadow ray; hits within
@@ -336,9 +465,20 @@ impl<'a> SceneLights<'a> {
         (penumbra / slant).max(POINT_BAND * dist)
     }
 
-    /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1`;
-    /// `None` when no receiver face is found under it or it has no length.
-    pub fn edge_error(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3, rule: &[(f64, f64)]) -> Option<f64> {
+    /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1` (a
+    /// [`Job`]); `None` when no receiver face is found under it, it has no length or its
+    /// light is not in the scene. See [`Self::band_error`] for `how`.
+    pub fn edge_error(&self, (e, k, s0, s1): &Job, rules: &Rules, how: Estimate, culls: &mut Culls) -> Option<f64> {
+        let k = *k as usize;
+        if k >= self.lights.len() {
+            return None;
+        }
+        let band = self.edge_band(e, k, *s0, *s1)?;
+        Some(self.band_error(&band, k, rules, how, culls))
+    }
+
+    /// The band of shadow edge `e` of light `k` (see [`Self::edge_error`]).
+    pub fn edge_band(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3) -> Option<Band> {
         let (a, b) = (e.a.as_dvec3(), e.b.as_dvec3());
         let m = 0.5 * (a + b);
         let mut n = self.receiver_normal(e.object, m)?;
@@ -346,8 +486,21 @@ impl<'a> SceneLights<'a> {
         if n.dot(self.lights[k].center().as_dvec3() - m) < 0.0 {
             n = -n;
         }
-        let band = Band::new(a, b, n, self.half_width(k, m, n, s0, s1))?;
-        Some(washout_error(&band, k, self.lights.len(), rule, |j, x, n| self.irradiance(j, x, n)))
+        Band::new(a, b, n, self.half_width(k, m, n, s0, s1))
+    }
+
+    /// [`washout_error`] of light `k` over `band` with exact irradiance. With `how.cull`, a
+    /// light that [`Self::reaches`] says lights none of the band counts as 0 without
+    /// evaluating it (the same estimate); with `how.bounded`, [`washout_error_bounded`].
+    pub fn band_error(&self, band: &Band, k: usize, rules: &Rules, how: Estimate, culls: &mut Culls) -> f64 {
+        let reach: Vec<bool> = (0..self.lights.len()).map(|j| !how.cull || self.reaches(j, band, culls)).collect();
+        let e = |j: usize, x: DVec3, n: DVec3| if reach[j] { self.irradiance(j, x, n) } else { 0.0 };
+        if how.bounded {
+            let b = |j: usize, x: DVec3, n: DVec3| if reach[j] { self.unoccluded(j, x, n) } else { 0.0 };
+            washout_error_bounded(band, k, self.lights.len(), &rules.full, e, b)
+        } else {
+            washout_error(band, k, self.lights.len(), &rules.full, e)
+        }
     }
 }
 
@@ -371,6 +524,35 @@ fn pyramid_planes(apex: DVec3, base: &[DVec3]) -> Vec<(DVec3, DVec3)> {
 
 type EdgeKey = (u32, u32, u8, [u32; 6]);
 
+/// One shadow edge to estimate: the edge, its light, and its blocker's points (world).
+pub type Job = (EdgeSegment, u32, DVec3, DVec3);
+
+/// Every shadow edge of `store` as a [`Job`], in the store's order.
+pub fn jobs(store: &ShadowStore, transforms: &[Affine3A]) -> Vec<Job> {
+    let mut out = Vec::new();
+    for ((l, b), ev, segs) in store.events_with_edges() {
+        let tb = daffine(transforms.get(b as usize).unwrap_or(&Affine3A::IDENTITY));
+        let (s0, s1) = (tb.transform_point3(ev.s[0].as_dvec3()), tb.transform_point3(ev.s[1].as_dvec3()));
+        out.extend(segs.iter().map(|e| (*e, l, s0, s1)));
+    }
+    out
+}
+
+/// The estimates of `jobs` on the rayon pool (infinite where none can be made), with
+/// what the culls skipped.
+pub fn estimate(scene: &SceneLights, jobs: &[Job], rules: &Rules, how: Estimate) -> (Vec<f64>, Culls) {
+    let out: Vec<(f64, Culls)> = jobs
+        .par_iter()
+        .map(|job| {
+            let mut c = Culls::default();
+            (scene.edge_error(job, rules, how, &mut c).unwrap_or(f64::INFINITY), c)
+        })
+        .collect();
+    let mut culls = Culls::default();
+    out.iter().for_each(|(_, c)| culls.add(c));
+    (out.into_iter().map(|(e, _)| e).collect(), culls)
+}
+
 fn key(light: u32, e: &EdgeSegment) -> EdgeKey {
     let [a, b] = [e.a, e.b].map(|p| p.to_array().map(f32::to_bits));
     (light, e.object, e.kind as u8, [a[0], a[1], a[2], b[0], b[1], b[2]])
@@ -381,15 +563,19 @@ fn key(light: u32, e: &EdgeSegment) -> EdgeKey {
 /// can change any band's irradiance, so a move forgets them all).
 #[derive(Default)]
 pub struct EdgeErrors {
+    /// How the estimates are made ([`Estimate::FAST`] by default; others only to compare).
+    pub how: Estimate,
+    /// What the culls skipped, summed over every estimate made.
+    pub culls: Culls,
     lights: Vec<Light>,
     transforms: Vec<Affine3A>,
     known: HashMap<EdgeKey, f64>,
-    rule: Vec<(f64, f64)>,
+    rules: Rules,
 }
 
 impl EdgeErrors {
     pub fn new() -> EdgeErrors {
-        EdgeErrors { rule: gauss_legendre(ORDER), ..Default::default() }
+        EdgeErrors { rules: Rules::new(), ..Default::default() }
     }
 
     /// Whether [`Self::update`] would estimate any edge of `store`.
@@ -409,37 +595,25 @@ impl EdgeErrors {
             self.transforms = transforms.to_vec();
         }
         let scene = SceneLights::new(lights, bvhs, transforms);
-        let mut todo: Vec<(EdgeSegment, u32, DVec3, DVec3)> = Vec::new();
-        let mut all = Vec::new();
-        for ((l, b), ev, segs) in store.events_with_edges() {
-            let tb = daffine(transforms.get(b as usize).unwrap_or(&Affine3A::IDENTITY));
-            let (s0, s1) = (tb.transform_point3(ev.s[0].as_dvec3()), tb.transform_point3(ev.s[1].as_dvec3()));
-            for e in segs {
-                all.push((*e, l));
-                if !self.known.contains_key(&key(l, e)) {
-                    todo.push((*e, l, s0, s1));
-                }
-            }
-        }
-        let rule = &self.rule;
-        let fresh: Vec<(EdgeKey, f64)> = todo
-            .par_iter()
-            .map(|(e, l, s0, s1)| {
-                let err = if (*l as usize) < lights.len() { scene.edge_error(e, *l as usize, *s0, *s1, rule) } else { None };
-                (key(*l, e), err.unwrap_or(f64::INFINITY))
-            })
-            .collect();
+        let all = jobs(store, transforms);
+        let todo: Vec<Job> = all.iter().filter(|(e, l, _, _)| !self.known.contains_key(&key(*l, e))).copied().collect();
+        let (errs, culls) = estimate(&scene, &todo, &self.rules, self.how);
+        self.culls.add(&culls);
+        let fresh: Vec<(EdgeKey, f64)> = todo.iter().zip(errs).map(|((e, l, _, _), err)| (key(*l, e), err)).collect();
         let estimated = fresh.len();
         self.known.extend(fresh);
         // Edges no longer stored are forgotten.
         if self.known.len() > all.len() {
-            let live: std::collections::HashSet<EdgeKey> = all.iter().map(|(e, l)| key(*l, e)).collect();
+            let live: std::collections::HashSet<EdgeKey> = all.iter().map(|(e, l, _, _)| key(*l, e)).collect();
             self.known.retain(|k, _| live.contains(k));
         }
-        let out = all.into_iter().map(|(e, l)| (e, self.known.get(&key(l, &e)).copied().unwrap_or(f64::INFINITY))).collect();
+        let out = all.into_iter().map(|(e, l, _, _)| (e, self.known.get(&key(l, &e)).copied().unwrap_or(f64::INFINITY))).collect();
         (out, estimated)
     }
 }
+
+mod reach;
+pub use reach::{convex_hull, Culls};
 
 #[cfg(test)]
 mod tests;

@@ -5,6 +5,7 @@ use crate::edges::TripleKey;
 use edgepoint_scene::backprojection::irradiance_with_blockers;
 use edgepoint_scene::builtin::shapes::{cuboid, polygon};
 use edgepoint_scene::{Camera, Material, NoProgress, Object, Scene};
+use glam::DVec2;
 use std::sync::Arc;
 
 /// ∫ x^d over [lo, hi].
@@ -78,6 +79,80 @@ fn a_step_and_a_ramp_give_the_closed_form_estimates() {
     // Light 0 smooth (linear) across the band: nothing to lose.
     let linear = |k: usize, x: DVec3, _n: DVec3| if k == 0 { 1.0 + x.dot(b.across) } else { 0.0 };
     assert!(washout_error(&b, 0, 1, &rule, linear) < 1e-15);
+}
+
+/// Other lights bounded: with a second light far below [`COMPARABLE`] of the own light's
+/// mean it is never evaluated, and the estimate (with half its unoccluded mean) is within
+/// COMPARABLE / 2 of the full one, e/√12 / (e/2 + c); where it is comparable the full
+/// estimate, with 18 evaluations of it.
+#[test]
+fn other_lights_that_are_not_comparable_are_bounded_not_evaluated() {
+    let b = band();
+    let rules = Rules::new();
+    // (the second light's level, its unoccluded level, comparable)
+    for (c, free, comparable) in [(0.01, 0.02, false), (0.0, 0.04, false), (0.03, 0.045, false), (0.3, 0.4, true), (2.0, 2.0, true)] {
+        let calls = std::cell::Cell::new(0usize);
+        let step = |k: usize, x: DVec3, _n: DVec3| {
+            if k == 0 {
+                if x.dot(b.across) > 0.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            } else {
+                calls.set(calls.get() + 1);
+                c
+            }
+        };
+        let bound = |k: usize, _x: DVec3, _n: DVec3| if k == 0 { 1.0 } else { free };
+        let full = washout_error(&b, 0, 2, &rules.full, step);
+        let full_calls = calls.replace(0);
+        let fast = washout_error_bounded(&b, 0, 2, &rules.full, step, bound);
+        let want = 1.0 / 12f64.sqrt() / (0.5 + c);
+        assert!((full - want).abs() <= 1e-12 * want, "{c}: {full} against {want}");
+        assert_eq!(full_calls, 18);
+        if comparable {
+            assert_eq!(calls.get(), 18, "{c}");
+            assert!((fast - full).abs() <= 1e-12 * full, "{c}: {fast} against {full}");
+        } else {
+            assert_eq!(calls.get(), 0, "{c}");
+            let fast_want = 1.0 / 12f64.sqrt() / (0.5 + 0.5 * free);
+            assert!((fast - fast_want).abs() <= 1e-12 * fast_want, "{c}: {fast} against {fast_want}");
+            assert!((fast - full).abs() <= 0.5 * COMPARABLE * full, "{c}: {fast} against {full}");
+        }
+    }
+    // The own light smooth: 0 without evaluating or bounding the other light.
+    let calls = std::cell::Cell::new(0usize);
+    let flat = |k: usize, _x: DVec3, _n: DVec3| {
+        if k == 1 {
+            calls.set(calls.get() + 1);
+        }
+        1.0
+    };
+    assert_eq!(washout_error_bounded(&b, 0, 2, &rules.full, flat, flat), 0.0);
+    assert_eq!(calls.get(), 0);
+}
+
+/// On random scenes and bands the bounded estimate stays within COMPARABLE / 2 of the full
+/// one, and the unoccluded irradiance bounds the exact one at every node.
+#[test]
+fn bounded_estimates_stay_within_half_the_comparable_fraction() {
+    let rules = Rules::new();
+    let mut bounded = 0;
+    for_random_bands(5, 60, 10, |lights, band, k, r| {
+        let fast = lights.band_error(band, k, &rules, Estimate::FAST, &mut Culls::default());
+        let full = lights.band_error(band, k, &rules, Estimate::FULL, &mut Culls::default());
+        assert!(fast == full || (fast - full).abs() <= 0.5 * COMPARABLE * full + 1e-12, "{fast} against {full} ({band:?})");
+        bounded += usize::from(fast != full && (fast - full).abs() > 1e-9 * full);
+        for _ in 0..5 {
+            let x = band.point(r.f64(), 2.0 * r.f64() - 1.0);
+            for j in 0..lights.lights() {
+                let (e, u) = (lights.irradiance(j, x, band.normal), lights.unoccluded(j, x, band.normal));
+                assert!(e <= u * (1.0 + 1e-9) + 1e-15, "light {j} at {x}: {e} over its bound {u}");
+            }
+        }
+    });
+    assert!(bounded >= 5, "only {bounded} estimates used the bound");
 }
 
 const PLATE: u32 = 1;
@@ -178,4 +253,185 @@ fn point_lights_hard_edges_wash_out_the_same_way() {
     let equal = with(1.0);
     assert!(equal.iter().all(|(_, x)| *x > 0.1 && *x < 0.2), "equal: {equal:?}");
     assert!(with(20.0).iter().all(|(_, x)| *x < 0.05), "20 times brighter");
+}
+
+/// Two 4 m rooms side by side (a floor, a 10 cm wall at x = 4 with a random doorway or none,
+/// placed by its object's transform), random boxes, and random lights: area lights facing
+/// down, up or tilted, point lights, in either room.
+fn two_rooms(r: &mut crate::rng::Rng) -> Scene {
+    let obj = |name: &str, mesh, transform| Object { name: name.into(), mesh: Arc::new(mesh), material: Material::default(), transform };
+    let floor = polygon(&[Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 4.0), Vec3::new(8.0, 0.0, 4.0), Vec3::new(8.0, 0.0, 0.0)]);
+    let mut objects = vec![obj("floor", floor, Affine3A::IDENTITY)];
+    // The wall in its own frame (centred on x = 0), moved to x = 4: with a doorway, three
+    // boxes (two sides and a lintel overlapping them), else one.
+    let mut wall = edgepoint_scene::builtin::shapes::Parts::default();
+    if r.chance(0.6) {
+        let z0 = r.range(0.3, 2.5);
+        let z1 = z0 + r.range(0.4, 1.2);
+        let top = r.range(1.5, 2.3);
+        wall.add(&cuboid(Vec3::new(-0.05, 0.0, 0.0), Vec3::new(0.05, 2.6, z0)), Affine3A::IDENTITY);
+        wall.add(&cuboid(Vec3::new(-0.05, 0.0, z1), Vec3::new(0.05, 2.6, 4.0)), Affine3A::IDENTITY);
+        wall.add(&cuboid(Vec3::new(-0.05, top, z0 - 0.02), Vec3::new(0.05, 2.6, z1 + 0.02)), Affine3A::IDENTITY);
+    } else {
+        wall.add(&cuboid(Vec3::new(-0.05, 0.0, 0.0), Vec3::new(0.05, 2.6, 4.0)), Affine3A::IDENTITY);
+    }
+    objects.push(obj("wall", wall.mesh(), Affine3A::from_translation(Vec3::new(4.0, 0.0, 0.0))));
+    for i in 0..r.below(4) {
+        let c = Vec3::new(r.range(0.3, 7.7), r.range(0.2, 1.5), r.range(0.3, 3.7));
+        let h = r.vec3(0.05, 0.4);
+        let turn = Affine3A::from_translation(c) * Affine3A::from_rotation_y(r.range(0.0, 3.0));
+        objects.push(obj(&format!("box{i}"), cuboid(-h, h), turn));
+    }
+    let mut lights = Vec::new();
+    for _ in 0..2 + r.below(3) {
+        let c = Vec3::new(r.range(0.5, 7.5), r.range(1.8, 2.5), r.range(0.5, 3.5));
+        if r.chance(0.3) {
+            lights.push(Light::Point { position: c, intensity: Vec3::splat(r.range(1.0, 5.0)) });
+        } else {
+            // Mostly facing down; sometimes up (the floor is behind it) or tilted.
+            let n = match r.below(3) {
+                0 => Vec3::Y,
+                1 => (Vec3::NEG_Y + r.vec3(-0.8, 0.8)).normalize(),
+                _ => Vec3::NEG_Y,
+            };
+            let u = n.any_orthonormal_vector();
+            let w = n.cross(u);
+            let a = r.range(0.1, 0.5);
+            let vertices = [(-a, -a), (a, -a), (a, a), (-a, a)].iter().map(|&(x, y)| c + u * x + w * y).collect();
+            lights.push(Light::Area { vertices, radiance: Vec3::splat(r.range(2.0, 10.0)) });
+        }
+    }
+    Scene {
+        name: "two-rooms".into(),
+        objects,
+        lights,
+        camera: Camera { eye: Vec3::new(1.0, 1.6, 1.0), target: Vec3::new(6.0, 0.5, 2.0), up: Vec3::Y, fov_y_degrees: 60.0 },
+        ambient: Vec3::ZERO,
+        background: Vec3::ZERO,
+        orbit: None,
+    }
+}
+
+/// A random band: on the floor, on either face of the wall, or anywhere with any normal.
+fn random_band(r: &mut crate::rng::Rng) -> Band {
+    let (a, normal, along) = match r.below(4) {
+        0 | 1 => (DVec3::new(r.f64() * 8.0, 0.0, r.f64() * 4.0), DVec3::Y, DVec3::new(r.f64() - 0.5, 0.0, r.f64() - 0.5)),
+        2 => {
+            let x = if r.chance(0.5) { 3.95 } else { 4.05 };
+            (DVec3::new(x, r.f64() * 2.5, r.f64() * 4.0), DVec3::new(if x < 4.0 { -1.0 } else { 1.0 }, 0.0, 0.0), DVec3::new(0.0, r.f64() - 0.5, r.f64() - 0.5))
+        }
+        _ => {
+            let n = r.direction().as_dvec3();
+            (DVec3::new(r.f64() * 8.0, r.f64() * 2.5, r.f64() * 4.0), n, n.any_orthonormal_vector())
+        }
+    };
+    let b = a + along.normalize_or(DVec3::X) * (0.05 + r.f64());
+    Band::new(a, b, normal, 0.02 + 0.5 * r.f64()).unwrap()
+}
+
+/// `scenes` random [`two_rooms`] with `bands` random bands each: `f(lights, band, k, rng)`
+/// for a random light k of the scene.
+fn for_random_bands(seed: u64, scenes: usize, bands: usize, mut f: impl FnMut(&mut SceneLights, &Band, usize, &mut crate::rng::Rng)) {
+    let mut r = crate::rng::Rng::new(seed);
+    for _ in 0..scenes {
+        let scene = two_rooms(&mut r);
+        let bvhs: Vec<FaceBvh> = scene.objects.iter().map(|o| FaceBvh::build(&o.mesh, &NoProgress)).collect();
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let mut lights = SceneLights::new(&scene.lights, &bvhs, &t);
+        for _ in 0..bands {
+            let band = random_band(&mut r);
+            let k = r.below(scene.lights.len());
+            f(&mut lights, &band, k, &mut r);
+        }
+    }
+}
+
+/// The culls are exact: with them every estimate is the one made with every light (random
+/// scenes, bands and lights), and at random points of a band a culled light's irradiance
+/// is 0. Every kind of cull happens.
+#[test]
+fn culled_estimates_equal_the_unculled_ones() {
+    let rules = Rules::new();
+    let cull_only = Estimate { cull: true, bounded: false };
+    let mut total = Culls::default();
+    let mut partly = 0;
+    for_random_bands(31, 30, 12, |lights, band, k, r| {
+        let mut c = Culls::default();
+        let with = lights.band_error(band, k, &rules, cull_only, &mut c);
+        let without = lights.band_error(band, k, &rules, Estimate::FULL, &mut Culls::default());
+        let same = with == without || (with - without).abs() <= 1e-9 * without.abs();
+        assert!(same, "culled {with} against {without} ({c:?}, light {k}, {band:?})");
+        if c.facing + c.behind + c.blocked > 0 && c.facing + c.behind + c.blocked < c.pairs {
+            partly += 1;
+        }
+        total.add(&c);
+        // Each culled light lights no point of the band.
+        for j in 0..lights.lights() {
+            if !lights.reaches(j, band, &mut Culls::default()) {
+                for _ in 0..20 {
+                    let x = band.point(r.f64(), 2.0 * r.f64() - 1.0);
+                    let e = lights.irradiance(j, x, band.normal);
+                    assert!(e <= 1e-9 * lights.weights[j], "light {j} culled but gives {e} at {x} ({band:?})");
+                }
+            }
+        }
+    });
+    assert!(total.facing >= 10 && total.behind >= 10 && total.blocked >= 10, "{total:?}");
+    assert!(partly >= 10, "bands with some lights culled and others not: {partly}");
+}
+
+/// The hull of a square's corners, a point on one of its sides and random points inside is
+/// the square, counter-clockwise.
+#[test]
+fn convex_hull_of_a_square_and_points_inside() {
+    let mut p = vec![DVec2::new(0.0, 0.0), DVec2::new(2.0, 0.0), DVec2::new(2.0, 2.0), DVec2::new(0.0, 2.0)];
+    let mut r = crate::rng::Rng::new(3);
+    for _ in 0..50 {
+        p.push(DVec2::new(2.0 * r.f64(), 2.0 * r.f64()));
+    }
+    p.push(DVec2::new(1.0, 0.0));
+    let h = convex_hull(p);
+    assert_eq!(h.len(), 4, "{h:?}");
+    assert!((edgepoint_scene::polyclip::signed_area2(&h) - 8.0).abs() < 1e-12, "{h:?}");
+}
+
+/// Closed meshes wound outward block through their exit faces alone: the irradiance of every
+/// light at random points of random bands (on the floor, the wall, anywhere: some inside a
+/// box) is the one with every face, and the exit faces are used (the boxes and the wall).
+#[test]
+fn exit_faces_of_closed_meshes_hide_what_all_faces_hide() {
+    let mut shadowed = 0;
+    for_random_bands(41, 30, 10, |lights, band, _k, r| {
+        assert!(lights.bvhs.iter().skip(1).all(|b| b.oriented), "the wall and the boxes are closed and wound outward");
+        for _ in 0..10 {
+            let x = band.point(r.f64(), 2.0 * r.f64() - 1.0);
+            for j in 0..lights.lights() {
+                lights.exit_faces = true;
+                let fast = lights.irradiance(j, x, band.normal);
+                lights.exit_faces = false;
+                let all = lights.irradiance(j, x, band.normal);
+                assert!((fast - all).abs() <= 1e-9 * lights.weights[j], "light {j} at {x}: {fast} against {all}");
+                shadowed += usize::from(all < lights.unoccluded(j, x, band.normal) * (1.0 - 1e-6));
+            }
+        }
+    });
+    assert!(shadowed >= 100, "only {shadowed} shadowed points");
+}
+
+/// A box is closed and wound outward; with one face turned over, or one face missing, or
+/// turned inside out, it is not.
+#[test]
+fn orientation_of_closed_meshes() {
+    let m = cuboid(Vec3::ZERO, Vec3::ONE);
+    assert!(crate::edges::face_bvh::consistently_oriented(&m.triangles));
+    assert!(FaceBvh::build(&m, &NoProgress).oriented);
+    let mut flipped = m.triangles.clone();
+    flipped[3].swap(1, 2);
+    assert!(!crate::edges::face_bvh::consistently_oriented(&flipped));
+    assert!(!crate::edges::face_bvh::consistently_oriented(&m.triangles[1..]));
+    let mut inside_out = m.clone();
+    inside_out.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+    assert!(crate::edges::face_bvh::consistently_oriented(&inside_out.triangles));
+    let parts = edgepoint_scene::builtin::shapes::Parts { positions: inside_out.positions.clone(), triangles: inside_out.triangles.clone() };
+    assert!(!FaceBvh::build(&parts.mesh(), &NoProgress).oriented, "inside out");
 }
