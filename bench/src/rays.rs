@@ -52,7 +52,10 @@ pub trait Tracer: Sync {
     fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool;
 }
 
-/// The worker's tracer exactly as the shaders call it: the two-level BVH with one instance.
+/// The worker's tracer: the two-level BVH with one instance, its closest hits as
+/// [`edgepoint_worker::bvh::RayHit`] (ids, t and the unnormalised geometric normal, what
+/// Embree's `rtcIntersect1` returns; the shaders' `closest_hit` adds the position and unit
+/// normals to that).
 struct WorkerTracer {
     bvh: SceneBvh,
     inst: Instances,
@@ -60,7 +63,7 @@ struct WorkerTracer {
 
 impl Tracer for WorkerTracer {
     fn closest(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32)> {
-        self.inst.closest_hit(&self.bvh, o, d, 0.0, tmax).map(|h| (h.t, h.triangle))
+        self.inst.closest(&self.bvh, o, d, 0.0, tmax).map(|h| (h.t, h.triangle))
     }
     fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
         self.inst.occluded(&self.bvh, o, d, 0.0, tmax).is_some()

@@ -319,6 +319,23 @@ struct Found {
     direction: Vec3A,
 }
 
+/// A closest hit as the traversal finds it, what Embree's `rtcIntersect1` returns: the ids,
+/// `t` and the unnormalised geometric normal; [`Hit`] (what [`Instances::closest_hit`]
+/// gives) adds the position and the unit normals, two square roots and divides a caller
+/// that needs no normal (the rays bench's tracer) should not pay for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayHit {
+    pub object: u32,
+    pub triangle: u32,
+    /// Distance along the ray in units of the ray direction's length.
+    pub t: f32,
+    /// The geometric normal (mesh winding) in the object's own coordinates, unnormalised:
+    /// `(b - a) × (c - a)` of the triangle's corners.
+    pub local_geometric: Vec3,
+    origin: Vec3A,
+    direction: Vec3A,
+}
+
 /// A closest hit, in world space.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
@@ -400,6 +417,17 @@ impl Instances {
 
     /// Closest hit with `tmin <= t <= tmax` (t in units of `dir`'s length).
     pub fn closest_hit(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        let RayHit { object, triangle, t, local_geometric, origin: lo, direction: ld } = self.closest(bvh, origin, dir, tmin, tmax)?;
+        // Normalised as `Tri4::normal` does: equal to `Mesh::face_normals` bit for bit.
+        let local_normal = local_geometric.normalize_or_zero();
+        let normal = (self.normal_to_world[object as usize] * Vec3A::from(local_normal)).normalize_or_zero();
+        Some(Hit { object, triangle, t, position: origin + dir * t, local: (lo + ld * t).into(), normal: normal.into(), local_normal })
+    }
+
+    /// The closest hit with `tmin <= t <= tmax` without its position and unit normals
+    /// ([`RayHit`]).
+    #[inline]
+    pub fn closest(&self, bvh: &SceneBvh, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<RayHit> {
         let ray = self.start_ray(origin, dir, tmin);
         let found = match self.simd {
             // SAFETY: `simd` is only `Avx2` when the CPU has AVX2 and FMA (`Simd::detect`,
@@ -409,19 +437,9 @@ impl Instances {
             // SAFETY: the baseline runs on every CPU of the target.
             _ => unsafe { self.closest_with::<Baseline>(bvh, &ray, tmax) },
         };
-        let Found { object, block: b, lane, t, origin: lo, direction: ld } = found?;
+        let Found { object, block: b, lane, t, origin, direction } = found?;
         let block = &bvh.objects[object as usize].blocks[b as usize];
-        let local_normal = block.normal(lane);
-        let normal = (self.normal_to_world[object as usize] * Vec3A::from(local_normal)).normalize_or_zero();
-        Some(Hit {
-            object,
-            triangle: block.tri[lane],
-            t,
-            position: origin + dir * t,
-            local: (lo + ld * t).into(),
-            normal: normal.into(),
-            local_normal,
-        })
+        Some(RayHit { object, triangle: block.tri[lane], t, local_geometric: block.geometric(lane), origin, direction })
     }
 
     /// [`Self::closest_with`] compiled for AVX2 and FMA.

@@ -44,14 +44,14 @@ impl Tri4 {
         Vec3::new(c[3 * corner][lane], c[3 * corner + 1][lane], c[3 * corner + 2][lane])
     }
 
-    /// The unit geometric normal of the triangle in `lane` (mesh winding), computed exactly
-    /// as the mesh computes its face normals (`(b - a) × (c - a)`, normalised) from the
-    /// same corners, so it equals `Mesh::face_normals` bit for bit; read from the block the
-    /// hit just loaded rather than from a normal array that would be one more cache miss.
+    /// The geometric normal of the triangle in `lane` (mesh winding), unnormalised:
+    /// `(b - a) × (c - a)` from the same corners as the mesh's face normals, so normalised
+    /// (`normalize_or_zero`) it equals `Mesh::face_normals` bit for bit; read from the block
+    /// the hit just loaded rather than from a normal array that would be one more cache miss.
     #[inline]
-    pub fn normal(&self, lane: usize) -> Vec3 {
+    pub fn geometric(&self, lane: usize) -> Vec3 {
         let a = self.corner(0, lane);
-        (self.corner(1, lane) - a).cross(self.corner(2, lane) - a).normalize_or_zero()
+        (self.corner(1, lane) - a).cross(self.corner(2, lane) - a)
     }
 
     /// The nearest lane hit with `ray.tmin <= t <= tmax`: (lane, t), tested with `K`.
