@@ -93,18 +93,20 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("building a thread pool")
 }
 
-/// Runs `build` on a one-thread pool `repeat` times: (the last result, the times in ms of
-/// process CPU time — one build thread, so CPU time is its time without the other jobs on
-/// a shared machine; it counts Embree's own build thread too).
-fn timed_builds<T: Send>(repeat: u32, build: impl Fn() -> Result<T> + Sync) -> Result<(T, Vec<f64>)> {
-    let one = pool(1)?;
+/// Runs `build` on a pool of `threads` threads `repeat` times: (the last result, the times
+/// in ms). One thread: process CPU time — one build thread, so CPU time is its time without
+/// the other jobs on a shared machine; it counts Embree's own build thread too. More: wall
+/// clock (CPU time would add the threads up).
+fn timed_builds<T: Send>(repeat: u32, threads: usize, build: impl Fn() -> Result<T> + Sync) -> Result<(T, Vec<f64>)> {
+    let p = pool(threads)?;
+    let clock = if threads == 1 { crate::clock::process_cpu_ms } else { crate::clock::wall_ms };
     let mut ms = Vec::new();
     let mut last = None;
     for _ in 0..repeat.max(1) {
         drop(last.take());
-        let t = crate::clock::process_cpu_ms();
-        let built = one.install(&build)?;
-        ms.push(crate::clock::process_cpu_ms() - t);
+        let t = clock();
+        let built = p.install(&build)?;
+        ms.push(clock() - t);
         last = Some(built);
     }
     Ok((last.expect("at least one build"), ms))
@@ -209,7 +211,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
 
     // Builds, one thread each (the build figures are one-thread figures).
     let mut entries = Vec::new();
-    let (worker, ms) = timed_builds(a.repeat, || {
+    let (worker, ms) = timed_builds(a.repeat, 1, || {
         let bvh = SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress);
         let inst = Instances::new(&bvh, &[tf]);
         Ok(WorkerTracer { bvh, inst })
@@ -223,13 +225,24 @@ pub fn run(a: RaysArgs) -> Result<()> {
         let inst = Instances::new(&bvh, &[tf]).with_simd(Simd::Baseline);
         entries.push(Entry { name: "worker_sse", tracer: Box::new(WorkerTracer { bvh, inst }), build_ms: vec![] });
     }
-    let (base, ms) = timed_builds(a.repeat, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
+    let (base, ms) = timed_builds(a.repeat, 1, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
     entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms });
     #[cfg(feature = "embree")]
     {
         let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
-        let (e, ms) = timed_builds(a.repeat, || embree::EmbreeMesh::build(&world, &mesh.triangles, 1))?;
+        let (e, ms) = timed_builds(a.repeat, 1, || embree::EmbreeMesh::build(&world, &mesh.triangles, 1))?;
         entries.push(Entry { name: "embree3", tracer: Box::new(e), build_ms: ms });
+    }
+    // Builds on two threads (wall clock; the worker's build splits its subtrees over its
+    // pool, Embree builds with two threads of its own).
+    let mut builds_2t = serde_json::Map::new();
+    let (_, ms) = timed_builds(a.repeat, 2, || Ok(SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress)))?;
+    builds_2t.insert("worker".into(), json!({"ms_median": crate::stats::median(&ms), "ms": ms}));
+    #[cfg(feature = "embree")]
+    {
+        let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
+        let (_, ms) = timed_builds(a.repeat, 2, || embree::EmbreeMesh::build(&world, &mesh.triangles, 2))?;
+        builds_2t.insert("embree3".into(), json!({"ms_median": crate::stats::median(&ms), "ms": ms}));
     }
 
     let base = entries.iter().position(|e| e.name == "baseline").context("the baseline tracer")?;
@@ -324,6 +337,10 @@ pub fn run(a: RaysArgs) -> Result<()> {
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
     table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
+    table.push_str(&format!(
+        "  BVH build, 2 threads (wall clock): {}\n",
+        builds_2t.iter().map(|(k, v)| format!("{k} {:.0} ms", v["ms_median"].as_f64().unwrap_or(f64::NAN))).collect::<Vec<_>>().join(", ")
+    ));
     table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().filter(|e| !e.build_ms.is_empty()).map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
     let out = json!({
         "mesh": a.mesh.display().to_string(),
@@ -336,6 +353,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "worker_simd": format!("{:?}", Simd::detect()),
         "workloads": rows,
         "build_one_thread": builds,
+        "build_two_threads_wall": builds_2t,
         "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": {
             "worker_over_baseline": wb / crate::stats::median(&entries[base].build_ms),

@@ -12,6 +12,7 @@ mod tri4;
 mod wide;
 
 use edgepoint_scene::{Mesh, Progress};
+use rayon::prelude::*;
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 #[cfg(target_arch = "x86_64")]
@@ -37,7 +38,9 @@ pub struct ObjectBvh {
 impl ObjectBvh {
     pub fn build(mesh: &Mesh) -> ObjectBvh {
         let start = std::time::Instant::now();
+        // On the caller's rayon pool, as the binary build's subtrees ([`sah_build`]).
         let boxes: Vec<Aabb> = (0..mesh.triangles.len())
+            .into_par_iter()
             .map(|f| {
                 let [a, b, c] = mesh.triangle(f).map(Vec3A::from);
                 Aabb::new(a.min(b).min(c), a.max(b).max(c))

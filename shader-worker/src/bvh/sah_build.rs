@@ -14,7 +14,10 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::node::Bvh2Node;
 use obvhs::bvh2::Bvh2;
 
-/// Bins per axis (Wald 2007 found 16–32 as good as a full sweep).
+/// Bins per axis (Wald 2007 found 16–32 as good as a full sweep) for a range of more than
+/// 16 primitives; ranges of 9–16 bin into 16, smaller ones into 8: with fewer keys than
+/// bins most bins are empty, and clearing and sweeping 3 × 32 of them cost more than
+/// binning the few primitives (most of the binary tree's nodes are such small ranges).
 const BINS: usize = 32;
 /// Cost of a binary node's box test relative to one leaf block's, per unit of area (as
 /// the collapse's costs, which decide the final tree; these only shape the binary one).
@@ -60,25 +63,41 @@ fn bounds(refs: &[PrimRef]) -> (Aabb, Aabb) {
     (b, c)
 }
 
-/// Per axis, the factor taking a key's offset from `cb.min` to its bin (slightly under
-/// BINS / extent so the largest key lands in the last bin; 0 on a flat axis).
+/// The number of bins for a range of `n` primitives (see [`BINS`]).
 #[inline]
-fn bin_scale(cb: &Aabb) -> Vec3A {
-    let ext = cb.diagonal();
-    Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32 * (1.0 - 1e-6)) / ext, Vec3A::ZERO)
+fn bins_for(n: usize) -> usize {
+    n.next_power_of_two().clamp(8, BINS)
 }
 
-/// The best binned split of `refs` (key bounds `cb`, box bounds `nb`): (axis, first bin
-/// of the right side, its cost), or `None` when the keys coincide on every axis.
-fn best_split(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Option<(usize, usize, f32)> {
+/// Per axis, the factor taking a key's offset from `cb.min` to one of `bins` bins (slightly
+/// under bins / extent so the largest key lands in the last bin; 0 on a flat axis).
+#[inline]
+fn bin_scale(cb: &Aabb, bins: usize) -> Vec3A {
     let ext = cb.diagonal();
-    let scale = bin_scale(cb);
-    let mut bin_box = [[Aabb::INVALID; BINS]; 3];
-    let mut bin_count = [[0u32; BINS]; 3];
+    Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(bins as f32 * (1.0 - 1e-6)) / ext, Vec3A::ZERO)
+}
+
+/// The best split of `refs` (key bounds `cb`, box bounds `nb`) between [`bins_for`] bins:
+/// (axis, first bin of the right side, its cost), or `None` when the keys coincide on
+/// every axis.
+fn best_split(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Option<(usize, usize, f32)> {
+    match bins_for(refs.len()) {
+        8 => best_split_in::<8>(refs, nb, cb),
+        16 => best_split_in::<16>(refs, nb, cb),
+        _ => best_split_in::<BINS>(refs, nb, cb),
+    }
+}
+
+/// [`best_split`] with `B` bins per axis (a constant, so the bins live in fixed arrays).
+fn best_split_in<const B: usize>(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Option<(usize, usize, f32)> {
+    let ext = cb.diagonal();
+    let scale = bin_scale(cb, B);
+    let mut bin_box = [[Aabb::INVALID; B]; 3];
+    let mut bin_count = [[0u32; B]; 3];
     for r in refs {
         let b = ((r.key() - cb.min) * scale).to_array();
         for a in 0..3 {
-            let k = (b[a] as usize).min(BINS - 1);
+            let k = (b[a] as usize).min(B - 1);
             bin_box[a][k] = bin_box[a][k].union(&r.bounds);
             bin_count[a][k] += 1;
         }
@@ -89,15 +108,15 @@ fn best_split(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Option<(usize, usize, f
             continue;
         }
         // right[k]: the area · blocks of bins k.. (k ≥ 1).
-        let mut right = [0f32; BINS];
+        let mut right = [0f32; B];
         let (mut rb, mut rn) = (Aabb::INVALID, 0usize);
-        for k in (1..BINS).rev() {
+        for k in (1..B).rev() {
             rb = rb.union(&bin_box[a][k]);
             rn += bin_count[a][k] as usize;
             right[k] = area(&rb) * blocks(rn);
         }
         let (mut lb, mut ln) = (Aabb::INVALID, 0usize);
-        for k in 1..BINS {
+        for k in 1..B {
             lb = lb.union(&bin_box[a][k - 1]);
             ln += bin_count[a][k - 1] as usize;
             if ln == 0 || ln == refs.len() {
@@ -112,10 +131,18 @@ fn best_split(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Option<(usize, usize, f
     best
 }
 
+/// Ranges of at least this many primitives are split off as tasks of their own when the
+/// build runs on more than one thread (below it a task is not worth its bookkeeping).
+const MIN_TASK: usize = 4096;
+
 /// The binary BVH over `boxes`: leaves of 1..=[`MAX_LEAF`] primitives
 /// (`primitive_indices[first_index..first_index + prim_count]`), the two children of an
-/// inner node at `first_index` and `first_index + 1`, node 0 the root.
+/// inner node at `first_index` and `first_index + 1`, node 0 the root. On a rayon pool of
+/// more than one thread the top of the tree is built first, down to ranges of about
+/// 1 / (8 · threads) of the primitives, and those subtrees in parallel, each into nodes of
+/// its own appended after; the splits, so the tree, are the same on any number of threads.
 pub fn build(boxes: &[Aabb]) -> Bvh2 {
+    use rayon::prelude::*;
     let mut b2 = Bvh2::default();
     if boxes.is_empty() {
         return b2;
@@ -124,12 +151,63 @@ pub fn build(boxes: &[Aabb]) -> Bvh2 {
     let (root, root_keys) = bounds(&refs);
     b2.nodes.reserve(boxes.len() / 2);
     b2.nodes.push(Bvh2Node { aabb: root, ..Default::default() });
-    // (node, its primitives' range in `refs`, their key bounds); an explicit stack since a
-    // degenerate mesh may make the tree deep.
-    let mut todo = vec![(0usize, 0usize, boxes.len(), root_keys)];
+    let threads = rayon::current_num_threads();
+    let defer_below = if threads > 1 { (boxes.len() / (8 * threads)).max(MIN_TASK) } else { 0 };
+    let mut tasks = grow(&mut b2.nodes, &mut refs, vec![(0usize, 0usize, boxes.len(), root_keys)], defer_below);
+    if !tasks.is_empty() {
+        // Disjoint ranges of `refs`, one per task, in order.
+        tasks.sort_unstable_by_key(|t| t.1);
+        let mut rest: &mut [PrimRef] = &mut refs;
+        let mut at = 0;
+        let mut jobs = Vec::with_capacity(tasks.len());
+        for &(node, begin, end, cb) in &tasks {
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(begin - at);
+            let (range, tail) = tail.split_at_mut(end - begin);
+            rest = tail;
+            at = end;
+            jobs.push((node, begin, range, cb));
+        }
+        let root_boxes: Vec<Aabb> = tasks.iter().map(|t| b2.nodes[t.0].aabb).collect();
+        let built: Vec<(usize, usize, Vec<Bvh2Node>)> = jobs
+            .into_par_iter()
+            .zip(root_boxes)
+            .map(|((node, begin, range, cb), aabb)| {
+                let mut nodes = vec![Bvh2Node { aabb, ..Default::default() }];
+                let len = range.len();
+                grow(&mut nodes, range, vec![(0, 0, len, cb)], 0);
+                (node, begin, nodes)
+            })
+            .collect();
+        // Each subtree's root takes its placeholder's slot, the rest goes after the nodes
+        // so far: local node i ≥ 1 lands at base + i − 1; leaves' ranges shift by `begin`.
+        for (node, begin, local) in built {
+            let base = b2.nodes.len();
+            let place = |mut n: Bvh2Node| {
+                n.first_index = if n.prim_count > 0 { n.first_index + begin as u32 } else { (base + n.first_index as usize - 1) as u32 };
+                n
+            };
+            b2.nodes[node] = place(local[0]);
+            b2.nodes.extend(local[1..].iter().map(|n| place(*n)));
+        }
+    }
+    b2.primitive_indices = refs.iter().map(|r| r.id).collect();
+    b2
+}
+
+/// Builds the subtrees `todo` holds — (node in `nodes`, its range of `refs`, the range's key
+/// bounds), the node's box already set — into `nodes`, leaves' ranges as indices into `refs`;
+/// a range of more than one and at most `defer_below` primitives is left unsplit and
+/// returned instead (0: none).
+fn grow(nodes: &mut Vec<Bvh2Node>, refs: &mut [PrimRef], mut todo: Vec<(usize, usize, usize, Aabb)>, defer_below: usize) -> Vec<(usize, usize, usize, Aabb)> {
+    let mut deferred = Vec::new();
+    // An explicit stack since a degenerate mesh may make the tree deep.
     while let Some((node, begin, end, cb)) = todo.pop() {
         let n = end - begin;
-        let nb = b2.nodes[node].aabb;
+        if n > 1 && n <= defer_below {
+            deferred.push((node, begin, end, cb));
+            continue;
+        }
+        let nb = nodes[node].aabb;
         let range = &mut refs[begin..end];
         let split = if n > 1 { best_split(range, &nb, &cb) } else { None };
         let leaf_cost = LEAF_COST * area(&nb) * blocks(n);
@@ -138,14 +216,15 @@ pub fn build(boxes: &[Aabb]) -> Bvh2 {
         let mut sides = None;
         let mid = match split {
             _ if n <= MAX_LEAF as usize && split.is_none_or(|s| leaf_cost <= s.2) => {
-                b2.nodes[node].prim_count = n as u32;
-                b2.nodes[node].first_index = begin as u32;
+                nodes[node].prim_count = n as u32;
+                nodes[node].first_index = begin as u32;
                 continue;
             }
             Some((axis, k, _)) => {
                 // Partition by bin, left bins first (the same arithmetic as the binning).
-                let scale = bin_scale(&cb)[axis];
-                let left = |r: &PrimRef| (((r.key()[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1) < k;
+                let bins = bins_for(n);
+                let scale = bin_scale(&cb, bins)[axis];
+                let left = |r: &PrimRef| (((r.key()[axis] - cb.min[axis]) * scale) as usize).min(bins - 1) < k;
                 let (mut i, mut j) = (0usize, n);
                 let [mut lb, mut lc, mut rb, mut rc] = [Aabb::INVALID; 4];
                 while i < j {
@@ -173,19 +252,18 @@ pub fn build(boxes: &[Aabb]) -> Bvh2 {
             // Every key at one point: halves in index order.
             None => n / 2,
         };
-        let first = b2.nodes.len();
-        b2.nodes[node].first_index = first as u32;
+        let first = nodes.len();
+        nodes[node].first_index = first as u32;
         for (side, (lo, hi)) in [(begin, begin + mid), (begin + mid, end)].into_iter().enumerate() {
             let (b, c) = match sides {
                 Some(s) => s[side],
                 None => bounds(&refs[lo..hi]),
             };
-            b2.nodes.push(Bvh2Node { aabb: b, ..Default::default() });
-            todo.push((b2.nodes.len() - 1, lo, hi, c));
+            nodes.push(Bvh2Node { aabb: b, ..Default::default() });
+            todo.push((nodes.len() - 1, lo, hi, c));
         }
     }
-    b2.primitive_indices = refs.iter().map(|r| r.id).collect();
-    b2
+    deferred
 }
 
 #[cfg(test)]
@@ -197,21 +275,14 @@ mod tests {
     /// (leaves: of their primitives'), and each inner node has two children.
     #[test]
     fn tree_covers_every_primitive_once_with_exact_boxes() {
-        let mut z = 99u64;
-        let mut next = || {
-            z = z.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (z >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let random: Vec<Aabb> = (0..2000)
-            .map(|_| {
-                let c = Vec3A::new(next(), next(), next()) * 10.0;
-                Aabb::new(c, c + Vec3A::new(next(), next(), next()))
-            })
-            .collect();
+        let random = random_boxes(99, 2000, Vec3A::splat(10.0));
         let same = vec![Aabb::new(Vec3A::ZERO, Vec3A::ONE); 37];
         let one = vec![Aabb::new(Vec3A::ONE, Vec3A::splat(2.0))];
-        for boxes in [random, same, one] {
-            let b2 = build(&boxes);
+        // Enough boxes for the two-thread build to split off subtrees (> MIN_TASK).
+        let many = random_boxes(98, 12 * MIN_TASK, Vec3A::splat(100.0));
+        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        for (boxes, threads) in [(&random, 1), (&same, 1), (&one, 1), (&random, 2), (&many, 2)] {
+            let b2 = if threads == 1 { build(boxes) } else { two.install(|| build(boxes)) };
             let mut seen = vec![0u32; boxes.len()];
             let mut stack = vec![0usize];
             let mut leaves = 0;
@@ -236,9 +307,57 @@ mod tests {
             }
             assert!(seen.iter().all(|&c| c == 1));
             assert_eq!(b2.nodes.len(), 2 * leaves - 1, "a full binary tree");
-            if boxes.len() == 2000 {
+            if boxes.len() >= 2000 {
                 assert!(leaves * 2 < boxes.len(), "random boxes share leaves: {leaves} leaves");
             }
         }
+    }
+
+    /// `n` unit-or-smaller boxes at uniform corners in [0, spread] (a fixed pseudo-random
+    /// sequence per seed).
+    fn random_boxes(seed: u64, n: usize, spread: Vec3A) -> Vec<Aabb> {
+        let mut z = seed;
+        let mut next = || {
+            z = z.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (z >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let c = Vec3A::new(next(), next(), next()) * spread;
+                Aabb::new(c, c + Vec3A::new(next(), next(), next()))
+            })
+            .collect()
+    }
+
+    /// The tree as the nodes' boxes and leaves' primitives in depth-first order, left child
+    /// first: equal for two builds that made the same splits, wherever their nodes sit.
+    fn shape(b2: &Bvh2) -> Vec<([f32; 6], Vec<u32>)> {
+        let mut out = Vec::new();
+        let mut stack = vec![0usize];
+        while let Some(k) = stack.pop() {
+            let n = &b2.nodes[k];
+            let (lo, hi) = (n.aabb.min.to_array(), n.aabb.max.to_array());
+            let prims = b2.primitive_indices[n.first_index as usize..(n.first_index + n.prim_count) as usize].to_vec();
+            if n.prim_count == 0 {
+                stack.extend([n.first_index as usize + 1, n.first_index as usize]);
+            }
+            out.push(([lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]], prims));
+        }
+        out
+    }
+
+    /// The build on two threads (subtrees built apart and appended) makes the very tree the
+    /// one-thread build does, on boxes enough to be split into tasks.
+    #[test]
+    fn two_threads_build_the_same_tree() {
+        // Flattened in y, so the splits are not all alike.
+        let boxes = random_boxes(7, 20 * MIN_TASK, Vec3A::new(100.0, 10.0, 100.0));
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| build(&boxes));
+        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap().install(|| build(&boxes));
+        assert_eq!(one.nodes.len(), two.nodes.len());
+        assert!(shape(&one) == shape(&two), "the two-thread tree differs");
+        // The node order does differ (the subtrees were appended), so the test compared
+        // trees rather than arrays.
+        assert!(one.nodes.iter().zip(&two.nodes).any(|(a, b)| a.first_index != b.first_index));
     }
 }
