@@ -153,6 +153,11 @@ pub fn run(args: QualityArgs) -> Result<()> {
             let mut finder = EdgeFinder::new(&staged.loaded.scene, &LogProgress::new(&format!("edge trees of {tag}")));
             let triples = if args.no_shadow_edges { Vec::new() } else { triples };
             finder.frame(&transforms, cam.eye, None, triples, edgepoint_server::edges::DEFAULT_SHARP_CUTOFF_DEGREES, &mut edges);
+            // As a session draws them: soft-shadow edges only where their penumbra is
+            // narrow on screen (edgepoint_server::epi::soft).
+            edges.retain(|e| e.kind.is_geometric());
+            let screen = edgepoint_server::epi::raster::SegmentProjector::new(&cam, w as usize, h as usize);
+            edgepoint_server::epi::soft::append_barriers(&finder.shadow_penumbrae(), Some(&screen), &mut edges);
         }
         let edge_counts = EdgeCounts::of(&edges);
         let background = staged.loaded.scene.background;

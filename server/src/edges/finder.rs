@@ -366,6 +366,16 @@ impl ShadowFinder {
         errors.update(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
     }
 
+    /// Every stored shadow edge (in the order of [`Self::append`] without a view) with its
+    /// penumbra at its two ends ([`SceneLights::penumbra`]: zero for hard edges), at the
+    /// transforms of the last update.
+    pub fn with_penumbrae(&self) -> Vec<(EdgeSegment, [Vec3; 2])> {
+        let (scene, transforms) = self.scene_lights();
+        let jobs = super::simplify::jobs(&self.store, transforms);
+        let penumbrae = super::simplify::penumbrae(&scene, &jobs);
+        jobs.into_iter().zip(penumbrae).map(|((e, ..), p)| (e, p)).collect()
+    }
+
     /// The scene as paper 003's estimate sees it, and the transforms, of the last update.
     pub fn scene_lights(&self) -> (SceneLights<'_>, &[Affine3A]) {
         (SceneLights::new(&self.lights, &self.index.bvhs, &self.transforms), &self.transforms)
@@ -397,6 +407,11 @@ impl EdgeFinder {
     /// Replaces light `i` (its shadow events are recomputed at the next frame).
     pub fn set_light(&mut self, i: usize, light: Light) {
         self.shadows.set_light(i, light);
+    }
+
+    /// [`ShadowFinder::with_penumbrae`]: every stored shadow edge with its penumbra.
+    pub fn shadow_penumbrae(&self) -> Vec<(EdgeSegment, [Vec3; 2])> {
+        self.shadows.with_penumbrae()
     }
 
     /// The edge trees of object `o`.

@@ -444,9 +444,19 @@ impl<'a> SceneLights<'a> {
 
     /// Half the band across an edge at `m` (receiver normal `n`) of light `k` cast by the
     /// blocker segment `s0`–`s1` (one point for an EV event): the width of the penumbra
-    /// there — the light's diameter seen through the blocker point, stretched by the
-    /// receiver's slant — and at least [`POINT_BAND`] of the distance to the light.
+    /// there ([`Self::penumbra_width`]), and at least [`POINT_BAND`] of the distance to the
+    /// light.
     pub fn half_width(&self, k: usize, m: DVec3, n: DVec3, s0: DVec3, s1: DVec3) -> f64 {
+        let dist = (m - self.lights[k].center().as_dvec3()).length();
+        self.penumbra_width(k, m, n, s0, s1).max(POINT_BAND * dist)
+    }
+
+    /// The width of light `k`'s penumbra at `m` (receiver normal `n`) across an edge cast by
+    /// the blocker segment `s0`–`s1`: the light's diameter seen through the blocker point
+    /// nearest `m`, D |m − s| / |s − c|, stretched by the receiver's slant (1 / cos, at most
+    /// 4×); 0 for a point light, and falling to 0 where the blocker touches the receiver
+    /// (contact hardening, paper 000 §6).
+    pub fn penumbra_width(&self, k: usize, m: DVec3, n: DVec3, s0: DVec3, s1: DVec3) -> f64 {
         let light = &self.lights[k];
         let c = light.center().as_dvec3();
         let dist = (m - c).length();
@@ -462,7 +472,22 @@ impl<'a> SceneLights<'a> {
         let s = s0 + d * u;
         let penumbra = diameter * (m - s).length() / (s - c).length().max(1e-12);
         let slant = (n.dot(c - m) / dist.max(1e-12)).abs().max(0.25);
-        (penumbra / slant).max(POINT_BAND * dist)
+        penumbra / slant
+    }
+
+    /// The penumbra across shadow edge `e` of light `k` (blocker points `s0`–`s1`) at its
+    /// two ends, as world vectors in the receiver's tangent plane perpendicular to the edge,
+    /// [`Self::penumbra_width`] long: what the EPI projects each frame to decide where the
+    /// edge is a barrier ([`crate::epi::soft`]). Zero (a barrier everywhere) for a hard
+    /// edge, and where no receiver face is found under the edge or it has no length.
+    pub fn penumbra(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3) -> [Vec3; 2] {
+        if !matches!(e.kind, super::EdgeKind::ShadowUmbral | super::EdgeKind::ShadowPenumbral) || k >= self.lights.len() {
+            return [Vec3::ZERO; 2];
+        }
+        let (a, b) = (e.a.as_dvec3(), e.b.as_dvec3());
+        let Some(n) = self.receiver_normal(e.object, 0.5 * (a + b)) else { return [Vec3::ZERO; 2] };
+        let Some(across) = n.cross(b - a).try_normalize() else { return [Vec3::ZERO; 2] };
+        [a, b].map(|p| (across * self.penumbra_width(k, p, n, s0, s1)).as_vec3())
     }
 
     /// The estimate for shadow edge `e` of light `k` cast by blocker points `s0`–`s1` (a
@@ -536,6 +561,11 @@ pub fn jobs(store: &ShadowStore, transforms: &[Affine3A]) -> Vec<Job> {
         out.extend(segs.iter().map(|e| (*e, l, s0, s1)));
     }
     out
+}
+
+/// [`SceneLights::penumbra`] of every job, on the rayon pool (a receiver-face query each).
+pub fn penumbrae(scene: &SceneLights, jobs: &[Job]) -> Vec<[Vec3; 2]> {
+    jobs.par_iter().map(|(e, k, s0, s1)| scene.penumbra(e, *k as usize, *s0, *s1)).collect()
 }
 
 /// The estimates of `jobs` on the rayon pool (infinite where none can be made), with

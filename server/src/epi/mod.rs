@@ -14,6 +14,10 @@
 //! 7. [`complex`] — the complex-pixel filter (§5.4);
 //! 8. [`overlay`] — diagnostic views of the EPI.
 //!
+//! Before step 2 the session cuts every soft-shadow edge to the part of it whose penumbra is
+//! narrow on screen ([`soft`]): elsewhere an area light's shadow boundary is continuous and
+//! interpolation crosses it.
+//!
 //! [`Epi`] owns every per-pixel buffer, allocated once for its image size, and times the
 //! stages under the names of paper Table 2. The edges come in as `&[EdgeSegment]`, from
 //! whichever finder produced them. Pixels left without any sample in reach are marked
@@ -34,6 +38,7 @@ pub mod interpolate;
 pub mod overlay;
 pub mod raster;
 pub mod reach;
+pub mod soft;
 pub mod spread;
 pub mod tables;
 mod testutil;

@@ -20,6 +20,10 @@
 //!   also estimates, per shadow edge, the error of leaving it out where the other lights
 //!   wash it out ([`crate::edges::simplify`]), and publishes only the edges at or above
 //!   the tolerance. At 0 nothing is estimated and every edge goes to the EPI.
+//! - Soft shadows: the shadow thread publishes every area-light shadow edge with its
+//!   penumbra's extent at its ends; each frame only the part of it whose penumbra is narrow
+//!   on screen goes to the EPI as a barrier ([`crate::epi::soft`]), and interpolation
+//!   crosses the rest (a soft shadow's boundary is continuous). Hard edges go whole.
 //!
 //! Both the build and the updates run on the [`crate::background`] pool, never on the
 //! global pool the frame loop's per-pixel passes use.
@@ -29,6 +33,8 @@ use crate::edges::finder::{GeometricFinder, SceneEdgeIndex, ShadowFinder, ViewVo
 use crate::edges::shadow::ShadowUpdateStats;
 use crate::edges::simplify::EdgeErrors;
 use crate::edges::EdgeSegment;
+use crate::epi::raster::SegmentProjector;
+use crate::epi::soft::append_barriers;
 use edgepoint_scene::{Progress, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::{Arc, Condvar, Mutex, OnceLock};
@@ -103,7 +109,9 @@ impl SessionEdges {
 
     /// This frame's edges into `out` (cleared first): the geometric edges seen from `eye`
     /// with the objects at `transforms`, and the newest shadow edges of `triples` — those
-    /// other lights do not wash out below `simplify_tolerance` (0: all of them).
+    /// other lights do not wash out below `simplify_tolerance` (0: all of them), the soft
+    /// ones cut to where their penumbra is narrow in the frame's projection `screen`
+    /// ([`crate::epi::soft`]; `None`: every edge whole).
     #[allow(clippy::too_many_arguments)]
     pub fn find(
         &mut self,
@@ -113,6 +121,7 @@ impl SessionEdges {
         triples: &dyn TripleSet,
         sharp_cutoff_degrees: f32,
         simplify_tolerance: f64,
+        screen: Option<&SegmentProjector>,
         out: &mut Vec<EdgeSegment>,
     ) -> EdgeSourceStats {
         out.clear();
@@ -141,7 +150,7 @@ impl SessionEdges {
         stats.shadow = r.current.stats;
         stats.shadow_simplified = r.current.simplified;
         stats.shadow_tolerance = r.current.tolerance;
-        out.extend_from_slice(&r.current.segments);
+        append_barriers(&r.current.segments, screen, out);
         stats
     }
 }
@@ -186,10 +195,11 @@ struct ShadowJob {
 }
 
 /// What the shadow thread publishes: the stored shadow edges that go to the EPI, world
-/// space, and how many the simplification left out.
+/// space, each with its penumbra at its ends (zero for hard edges), and how many the
+/// simplification left out.
 #[derive(Default)]
 struct ShadowResult {
-    segments: Vec<EdgeSegment>,
+    segments: Vec<(EdgeSegment, [Vec3; 2])>,
     stats: ShadowUpdateStats,
     simplified: usize,
     tolerance: f64,
@@ -199,7 +209,7 @@ struct ShadowResult {
 /// (simplification off: today's edges exactly), else those whose estimated error of
 /// leaving them out ([`crate::edges::simplify`]) is not below the tolerance. Returns how
 /// many were left out.
-pub fn chosen_shadow_edges(errors: &[(EdgeSegment, f64)], tolerance: f64, out: &mut Vec<EdgeSegment>) -> usize {
+pub fn chosen_shadow_edges<T: Copy>(errors: &[(T, f64)], tolerance: f64, out: &mut Vec<T>) -> usize {
     let before = out.len();
     if tolerance > 0.0 {
         out.extend(errors.iter().filter(|(_, e)| e.is_nan() || *e >= tolerance).map(|(s, _)| *s));
@@ -258,21 +268,22 @@ impl ShadowThread {
                 if tolerance > 0.0 {
                     // The estimates of new edges can take longer than the update (seconds
                     // on `rooms`): every edge goes out first, so shadows show meanwhile.
+                    let with_penumbrae = crate::background::pool().install(|| finder.with_penumbrae());
                     if finder.estimates_missing(&errors) {
-                        let mut segments = Vec::with_capacity(stats.segments);
-                        finder.append(None, &mut segments);
-                        publish(ShadowResult { segments, stats, simplified: 0, tolerance: 0.0 }, ms);
+                        publish(ShadowResult { segments: with_penumbrae.clone(), stats, simplified: 0, tolerance: 0.0 }, ms);
                     }
                     let t = Instant::now();
                     let (all, estimated) = crate::background::pool().install(|| finder.errors(&mut errors));
+                    // Both in the store's order.
+                    debug_assert_eq!(with_penumbrae.len(), all.len());
+                    let all: Vec<_> = with_penumbrae.into_iter().zip(&all).map(|(s, (_, e))| (s, *e)).collect();
                     let mut segments = Vec::with_capacity(all.len());
                     let simplified = chosen_shadow_edges(&all, tolerance, &mut segments);
                     let est_ms = t.elapsed().as_secs_f64() * 1e3;
                     tracing::debug!(edges = all.len(), estimated, left_out = simplified, ms = est_ms, "shadow edges simplified (paper 003)");
                     publish(ShadowResult { segments, stats, simplified, tolerance }, est_ms);
                 } else {
-                    let mut segments = Vec::with_capacity(stats.segments);
-                    finder.append(None, &mut segments);
+                    let segments = crate::background::pool().install(|| finder.with_penumbrae());
                     publish(ShadowResult { segments, stats, simplified: 0, tolerance }, ms);
                 }
             })
@@ -340,7 +351,7 @@ mod tests {
         let deadline = Instant::now() + Duration::from_secs(60);
         let mut out = Vec::new();
         loop {
-            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, tolerance, &mut out);
+            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, tolerance, None, &mut out);
             if done(&st, &out) {
                 return (out, st);
             }
@@ -371,7 +382,7 @@ mod tests {
         }
         // Whatever finder is in use, the geometric edges are the brute-force ones.
         let mut first = Vec::new();
-        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, 0.0, &mut first);
+        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, 0.0, None, &mut first);
         let mut brute = Vec::new();
         scene_edges(&scene, &t, scene.camera.eye, 85.0, &mut brute);
         let geo = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| s.kind.is_geometric()).collect::<Vec<_>>());

@@ -24,6 +24,7 @@ use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
 use crate::epi::{Epi, EpiCounts, Flags, InterpOptions, Overlay, STAGE_EDGES};
+use crate::epi::raster::SegmentProjector;
 use crate::epi::spread::BaselineHoles;
 use crate::render_cache::holes::{HoleFill, ObjectFill};
 use crate::render_cache::{CacheConfig, FrameCounts, LightBound, RenderCache, Sample};
@@ -376,6 +377,7 @@ impl FrameLoop {
                 &self.feedback.triples,
                 s.sharp_cutoff_degrees,
                 s.simplify_tolerance,
+                Some(&SegmentProjector::new(&self.cam_frame, self.width as usize, self.height as usize)),
                 &mut self.edges,
             );
             self.times.add(STAGE_EDGES, ms_since(t));

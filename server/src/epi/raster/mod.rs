@@ -160,6 +160,21 @@ impl SegmentProjector {
         SegmentProjector { eye: v64(cam.eye), rx: s(v64(cam.right), cx / (tan * aspect)), uy: s(v64(cam.up), cy / tan), f: v64(cam.forward), cx, cy }
     }
 
+    /// `p`'s depth along the view direction.
+    pub fn depth(&self, p: glam::Vec3) -> f64 {
+        let p = v64(p);
+        dot([p[0] - self.eye[0], p[1] - self.eye[1], p[2] - self.eye[2]], self.f)
+    }
+
+    /// `p`'s position in pixels (as [`Self::project`] places segment ends), or `None` when
+    /// it is not in front of the near plane.
+    pub fn pixel(&self, p: glam::Vec3) -> Option<[f64; 2]> {
+        let p = v64(p);
+        let p = [p[0] - self.eye[0], p[1] - self.eye[1], p[2] - self.eye[2]];
+        let z = dot(p, self.f);
+        (z >= NEAR).then(|| [self.cx + dot(p, self.rx) / z, self.cy - dot(p, self.uy) / z])
+    }
+
     /// The segment clipped to the near plane and projected, or `None` if it lies wholly
     /// behind it.
     pub fn project(&self, e: &EdgeSegment) -> Option<ScreenSegment> {
