@@ -47,6 +47,11 @@ pub struct SceneArgs {
     /// shared cores first (0 = same priority as the server).
     #[arg(long, default_value_t = edgepoint_viewer::local::WORKER_NICE)]
     pub worker_nice: i32,
+    /// Run the workers under Linux's SCHED_IDLE policy as well (`--worker-idle false`:
+    /// niceness only): a waking frame-loop thread then takes a core from a worker at once
+    /// instead of waiting for its time slice.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
+    pub worker_idle: bool,
     /// Shader name.
     #[arg(long, default_value = "direct")]
     pub shader: String,
@@ -111,6 +116,12 @@ pub struct FrameArgs {
     pub pace: PaceArgs,
     #[command(flatten)]
     pub reconstruction: edgepoint_viewer::ReconstructionArgs,
+    /// Orbit the camera this many degrees a frame along the scene's suggested orbit (the
+    /// viewer's --orbit), one step after each frame received: the stages of frames in
+    /// motion (0: a still camera). PSNR is then the last frame's, against the reference of
+    /// its camera; `motion` measures quality along a path frame by frame.
+    #[arg(long, default_value_t = 0.0, value_name = "DEG")]
+    pub orbit_degrees: f32,
     /// Skip the reference renders (no PSNR, no speedup).
     #[arg(long)]
     pub no_reference: bool,
@@ -154,6 +165,7 @@ pub(crate) fn start_cluster(a: &SceneArgs) -> Result<LocalCluster> {
         workers: a.workers,
         worker_threads: a.worker_threads,
         worker_nice: a.worker_nice,
+        worker_idle: a.worker_idle,
         log_level: Some(std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into())),
         ..Default::default()
     })
@@ -268,8 +280,20 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
         start.split = a.split.to_wire();
         let t0 = Instant::now();
         let (mut client, started) = SessionClient::connect(&cluster.server_url(), start).await?;
-        let camera = camera_from_wire(started.camera.as_ref().context("server sent no camera")?);
+        let mut camera = camera_from_wire(started.camera.as_ref().context("server sent no camera")?);
         let session_start_ms = t0.elapsed().as_secs_f64() * 1e3;
+        if !args.orbit_degrees.is_finite() {
+            bail!("--orbit-degrees must be a finite number of degrees");
+        }
+        let orbit = if args.orbit_degrees != 0.0 {
+            let mut o = edgepoint_viewer::camera_path::suggested_orbit(&started)?;
+            if let Some(fov) = a.camera.as_ref().and_then(|c| c.fov_y_degrees) {
+                o.fov_y_degrees = fov;
+            }
+            Some(o)
+        } else {
+            None
+        };
 
         let mut stage_ms: BTreeMap<String, Vec<f64>> = BTreeMap::new();
         let mut stage_order: Vec<String> = Vec::new();
@@ -309,6 +333,10 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
                         stage_ms.entry(s.stage.clone()).or_default().push(s.ms);
                     }
                     totals.push(f.total_ms);
+                    if let Some(o) = &orbit {
+                        let step = o.camera_after(totals.len() as f32 * args.orbit_degrees);
+                        client.send_camera(edgepoint_viewer::client::camera_to_wire(&step))?;
+                    }
                     samples.push(f.samples_used as f64);
                     between.push(f.between_ms);
                     dropped = f.frames_dropped;
@@ -330,6 +358,10 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
         };
         drop(client);
         let last = last.expect("at least one frame");
+        if orbit.is_some() {
+            // The reference of the camera the last frame shows.
+            camera = camera_from_wire(last.camera.as_ref().context("the last frame carries no camera")?);
+        }
         let img = edgepoint_viewer::frame::decode_frame(&last)?;
         let frame_lin: Vec<Vec3> = img.pixels().map(|p| srgb8_to_linear(p.0)).collect();
 
@@ -345,6 +377,8 @@ pub async fn session_report(cluster: &LocalCluster, args: &FrameArgs, source: &p
             "workers": a.workers,
             "worker_threads": a.worker_threads,
             "worker_nice": a.worker_nice,
+            "worker_idle": a.worker_idle,
+            "orbit_degrees_per_frame": args.orbit_degrees,
             "shader": a.shader,
             "split": a.split.to_string(),
             "frames": totals.len(),

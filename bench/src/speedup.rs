@@ -54,6 +54,11 @@ pub struct SpeedupArgs {
     /// Niceness added to the worker processes (the frame loop gets the shared cores first).
     #[arg(long, default_value_t = edgepoint_viewer::local::WORKER_NICE)]
     pub worker_nice: i32,
+    /// Run the workers under Linux's SCHED_IDLE policy as well (`--worker-idle false`:
+    /// niceness only): a waking frame-loop thread then takes a core from a worker at once
+    /// instead of waiting for its time slice.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
+    pub worker_idle: bool,
     /// Frames of each session.
     #[arg(long, default_value_t = 60)]
     pub frames: u32,
@@ -95,6 +100,7 @@ pub fn run(a: SpeedupArgs) -> Result<()> {
             workers: a.workers,
             worker_threads: a.worker_threads,
             worker_nice: a.worker_nice,
+            worker_idle: a.worker_idle,
             shader: String::new(),
             shader_params: Vec::new(),
             reference_spp: None,
@@ -144,6 +150,7 @@ pub fn run(a: SpeedupArgs) -> Result<()> {
         "workers": a.workers,
         "worker_threads": a.worker_threads,
         "worker_nice": a.worker_nice,
+        "worker_idle": a.worker_idle,
         "frames": a.frames,
         "batch": a.batch,
         "runs": rows,

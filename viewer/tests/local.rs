@@ -162,18 +162,34 @@ fn niceness(pid: u32) -> i32 {
     after.split(' ').nth(16).unwrap().parse().unwrap()
 }
 
+/// Linux's `SCHED_IDLE` policy number (`/proc/PID/stat` field 41).
+#[cfg(target_os = "linux")]
+const SCHED_IDLE: i64 = 5;
+
+/// A process's scheduling policy, from `/proc/PID/stat` (field 41).
+#[cfg(target_os = "linux")]
+fn policy(pid: u32) -> i64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let after = &stat[stat.rfind(')').unwrap() + 2..];
+    after.split(' ').nth(38).unwrap().parse().unwrap()
+}
+
 #[cfg(target_os = "linux")]
 #[test]
 fn workers_run_below_the_server_priority() {
     let dir = tempfile::tempdir().unwrap();
     fake_bin_dir(dir.path(), fake_server_addr());
     let me = niceness(std::process::id());
+    let my_policy = policy(std::process::id());
     let c = LocalCluster::start(LocalOptions { worker_nice: 3, ..opts(dir.path(), 2) }).unwrap();
     for i in 0..2 {
         assert_eq!(niceness(c.pid(i).unwrap()), (me + 3).min(19), "worker {i}");
+        assert_eq!(policy(c.pid(i).unwrap()), SCHED_IDLE, "worker {i} runs under SCHED_IDLE by default");
     }
     assert_eq!(niceness(c.server_pid().unwrap()), me, "the server keeps this process's priority");
+    assert_eq!(policy(c.server_pid().unwrap()), my_policy, "and its scheduling policy");
     drop(c);
-    let c = LocalCluster::start(LocalOptions { worker_nice: 0, ..opts(dir.path(), 1) }).unwrap();
+    let c = LocalCluster::start(LocalOptions { worker_nice: 0, worker_idle: false, ..opts(dir.path(), 1) }).unwrap();
     assert_eq!(niceness(c.pid(0).unwrap()), me);
+    assert_eq!(policy(c.pid(0).unwrap()), my_policy);
 }

@@ -166,3 +166,41 @@ fn runs_across_band_boundaries_and_of_the_start_pixel() {
     assert_eq!(bytes, reference_encode(&px, w, h));
     assert_eq!(bytes.len(), HEADER_LEN + 3 + 4 + 6 + END_MARKER.len(), "a 130-pixel run (62 + 62 + 6), RGB, a 319-pixel run (5 x 62 + 9)");
 }
+
+#[test]
+fn eight_pixels_at_a_time_write_the_bytes_of_the_scalar_loop() {
+    // Rows of every length around the eight-pixel blocks, pushed in pieces of every size,
+    // from every kind of start (mid-run, after an index write): the dispatching push (AVX2
+    // where the CPU has it) against the scalar loop alone.
+    let mut rng = Rng(21);
+    for case in 0..400 {
+        let n = 1 + (rng.next_u64() % 300) as usize;
+        let px = test_image(&mut rng, n);
+        let prev = if case % 4 == 0 {
+            START_PIXEL
+        } else {
+            px[(rng.next_u64() % n as u64) as usize]
+        };
+        let piece = 1 + (rng.next_u64() % 70) as usize;
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let mut fast = BandEncoder::new(prev, &mut a);
+        for chunk in px.chunks(piece) {
+            fast.push(chunk);
+        }
+        let fast_len = fast.finish();
+        let mut slow = BandEncoder::new(prev, &mut b);
+        for chunk in px.chunks(piece) {
+            let need = slow.len + MAX_BYTES_PER_PIXEL * chunk.len() + 4;
+            if slow.buf.len() < need {
+                slow.buf.resize(need, 0);
+            }
+            slow.push_scalar(chunk);
+        }
+        let slow_len = slow.finish();
+        assert_eq!(
+            a[..fast_len],
+            b[..slow_len],
+            "case {case}: {n} pixels in pieces of {piece}"
+        );
+    }
+}
