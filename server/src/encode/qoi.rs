@@ -54,6 +54,26 @@ fn select(c: bool, a: u32, b: u32) -> u32 {
     std::hint::select_unpredictable(c, a, b)
 }
 
+/// A pixel that repeats the previous one: the run grows, and a full run is written.
+#[inline(always)]
+fn extend_run(buf: &mut [u8], n: &mut usize, run: &mut u32) {
+    *run += 1;
+    if *run == MAX_RUN {
+        buf[*n] = OP_RUN | (MAX_RUN - 1) as u8;
+        *n += 1;
+        *run = 0;
+    }
+}
+
+/// Before a pixel that differs from the previous one: the byte ending a pending run,
+/// written always and kept only if there is one (no branch).
+#[inline(always)]
+fn end_run(buf: &mut [u8], n: &mut usize, run: &mut u32) {
+    buf[*n] = OP_RUN | run.wrapping_sub(1) as u8;
+    *n += (*run > 0) as usize;
+    *run = 0;
+}
+
 /// The encoder state of one band: previous pixel, index, pending run, and the bytes so far.
 ///
 /// It writes into a buffer from its start, using the buffer's current length as working
@@ -92,7 +112,8 @@ impl<'a> BandEncoder<'a> {
         }
         let mut rest = pixels;
         #[cfg(target_arch = "x86_64")]
-        if avx2::available() {
+        // (The detection is cached by the standard library.)
+        if is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2 and the buffer holds the worst case (above).
             let done = unsafe { avx2::push(self, pixels) };
             rest = &pixels[done..];
@@ -107,18 +128,10 @@ impl<'a> BandEncoder<'a> {
         let buf = &mut self.buf[..];
         for &px in pixels {
             if px == prev {
-                run += 1;
-                if run == MAX_RUN {
-                    buf[n] = OP_RUN | (MAX_RUN - 1) as u8;
-                    n += 1;
-                    run = 0;
-                }
+                extend_run(buf, &mut n, &mut run);
                 continue;
             }
-            // The byte ending a pending run, kept only if there is one.
-            buf[n] = OP_RUN | run.wrapping_sub(1) as u8;
-            n += (run > 0) as usize;
-            run = 0;
+            end_run(buf, &mut n, &mut run);
 
             let h = hash(px);
             let slot = index[h];
@@ -176,13 +189,8 @@ impl<'a> BandEncoder<'a> {
 /// (tested against it and against qoi.h's encoder).
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{select, BandEncoder, MAX_RUN, OP_INDEX, OP_RUN};
+    use super::{end_run, extend_run, select, BandEncoder, MAX_RUN, OP_INDEX};
     use std::arch::x86_64::*;
-
-    pub fn available() -> bool {
-        static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        *HAS.get_or_init(|| is_x86_feature_detected!("avx2"))
-    }
 
     /// A constant in every lane.
     #[inline]
@@ -289,17 +297,10 @@ mod avx2 {
             for k in 0..8 {
                 let px = *src.add(i + k);
                 if same >> k & 1 != 0 {
-                    run += 1;
-                    if run == MAX_RUN {
-                        buf[n] = OP_RUN | (MAX_RUN - 1) as u8;
-                        n += 1;
-                        run = 0;
-                    }
+                    extend_run(buf, &mut n, &mut run);
                     continue;
                 }
-                buf[n] = OP_RUN | run.wrapping_sub(1) as u8;
-                n += (run > 0) as usize;
-                run = 0;
+                end_run(buf, &mut n, &mut run);
                 let h = (info[k] & 63) as usize;
                 let hit = index[h] == px;
                 index[h] = px;
