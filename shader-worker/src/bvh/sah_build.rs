@@ -239,7 +239,12 @@ fn grow(nodes: &mut Vec<Bvh2Node>, refs: &mut [PrimRef], mut todo: Vec<(usize, u
         }
         let nb = nodes[node].aabb;
         let range = &mut refs[begin..end];
-        let split = if n > 1 { best_split(range, &nb, &cb) } else { None };
+        // A range that fits one leaf block is a leaf without binning: a split would cost
+        // NODE_COST · area(nb) plus its sides' non-negative terms, never less than the leaf's
+        // LEAF_COST · area(nb) · 1 (NODE_COST ≥ LEAF_COST, asserted below). Every leaf comes
+        // from such a range, so this skips as many bin sweeps as there are leaves.
+        const { assert!(NODE_COST >= LEAF_COST) };
+        let split = if n > MAX_LEAF as usize { best_split(range, &nb, &cb) } else { None };
         let leaf_cost = LEAF_COST * area(&nb) * blocks(n);
         // The children's box and key bounds, gathered by the partition when it runs (one
         // pass over the range fewer per level than measuring them after).
@@ -368,6 +373,25 @@ mod tests {
                         assert_eq!(left, want < k, "offset {} split at {k}", w[a]);
                     }
                 }
+            }
+        }
+    }
+
+    /// A range of at most MAX_LEAF primitives, made a leaf without binning, is one no split
+    /// would beat: the binned split's cost is never below the leaf's, on random ranges of
+    /// 2..=MAX_LEAF boxes of every size and on coincident ones.
+    #[test]
+    fn small_ranges_never_split_cheaper_than_a_leaf() {
+        let boxes = random_boxes(11, 4000, Vec3A::new(3.0, 0.5, 2.0));
+        let mut ranges: Vec<&[Aabb]> = (2..=MAX_LEAF as usize).flat_map(|n| boxes.chunks_exact(n).take(300)).collect();
+        let same = [Aabb::new(Vec3A::ZERO, Vec3A::ONE); 4];
+        ranges.push(&same);
+        for range in ranges {
+            let refs: Vec<PrimRef> = range.iter().enumerate().map(|(id, b)| PrimRef { bounds: *b, id: id as u32 }).collect();
+            let (nb, cb) = bounds(&refs);
+            let leaf_cost = LEAF_COST * area(&nb) * blocks(refs.len());
+            if let Some((_, _, cost)) = best_split(&refs, &nb, &cb) {
+                assert!(leaf_cost <= cost, "{} boxes: leaf {leaf_cost}, split {cost}", refs.len());
             }
         }
     }
