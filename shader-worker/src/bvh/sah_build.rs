@@ -77,6 +77,35 @@ fn bin_scale(cb: &Aabb, bins: usize) -> Vec3A {
     Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(bins as f32 * (1.0 - 1e-6)) / ext, Vec3A::ZERO)
 }
 
+/// Per axis, a key's offset from `min` in bins (`scale` from [`bin_scale`]): binning and
+/// partitioning compare the same numbers, so a primitive goes to the side its bin is on.
+#[inline(always)]
+fn bin_offset(key: Vec3A, min: Vec3A, scale: Vec3A) -> Vec3A {
+    (key - min) * scale
+}
+
+/// Per axis, the bin of [`bin_offset`] `x` among `bins`: truncated and clamped to
+/// 0..bins − 1, NaN to 0 (what `(x as usize).min(bins − 1)` gives), the three axes in one
+/// SSE conversion instead of three saturating scalar ones (the binning's main cost).
+#[inline(always)]
+fn bin_index(x: Vec3A, bins: usize) -> [i32; 4] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE and SSE2 are part of x86_64; __m128i and [i32; 4] are 16 plain bytes.
+        unsafe {
+            // `maxps` returns its second operand (0) when the first is NaN.
+            let c = _mm_min_ps(_mm_max_ps(x.into(), _mm_setzero_ps()), _mm_set1_ps((bins - 1) as f32));
+            std::mem::transmute::<__m128i, [i32; 4]>(_mm_cvttps_epi32(c))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let a = x.to_array();
+        [0, 1, 2, 0].map(|i| (a[i] as usize).min(bins - 1) as i32)
+    }
+}
+
 /// The best split of `refs` (key bounds `cb`, box bounds `nb`) between [`bins_for`] bins:
 /// (axis, first bin of the right side, its cost), or `None` when the keys coincide on
 /// every axis.
@@ -95,9 +124,10 @@ fn best_split_in<const B: usize>(refs: &[PrimRef], nb: &Aabb, cb: &Aabb) -> Opti
     let mut bin_box = [[Aabb::INVALID; B]; 3];
     let mut bin_count = [[0u32; B]; 3];
     for r in refs {
-        let b = ((r.key() - cb.min) * scale).to_array();
+        let b = bin_index(bin_offset(r.key(), cb.min, scale), B);
         for a in 0..3 {
-            let k = (b[a] as usize).min(B - 1);
+            // B is a power of two and b[a] < B: the mask only drops the bounds check.
+            let k = b[a] as usize & (B - 1);
             bin_box[a][k] = bin_box[a][k].union(&r.bounds);
             bin_count[a][k] += 1;
         }
@@ -209,7 +239,12 @@ fn grow(nodes: &mut Vec<Bvh2Node>, refs: &mut [PrimRef], mut todo: Vec<(usize, u
         }
         let nb = nodes[node].aabb;
         let range = &mut refs[begin..end];
-        let split = if n > 1 { best_split(range, &nb, &cb) } else { None };
+        // A range that fits one leaf block is a leaf without binning: a split would cost
+        // NODE_COST · area(nb) plus its sides' non-negative terms, never less than the leaf's
+        // LEAF_COST · area(nb) · 1 (NODE_COST ≥ LEAF_COST, asserted below). Every leaf comes
+        // from such a range, so this skips as many bin sweeps as there are leaves.
+        const { assert!(NODE_COST >= LEAF_COST) };
+        let split = if n > MAX_LEAF as usize { best_split(range, &nb, &cb) } else { None };
         let leaf_cost = LEAF_COST * area(&nb) * blocks(n);
         // The children's box and key bounds, gathered by the partition when it runs (one
         // pass over the range fewer per level than measuring them after).
@@ -221,10 +256,13 @@ fn grow(nodes: &mut Vec<Bvh2Node>, refs: &mut [PrimRef], mut todo: Vec<(usize, u
                 continue;
             }
             Some((axis, k, _)) => {
-                // Partition by bin, left bins first (the same arithmetic as the binning).
-                let bins = bins_for(n);
-                let scale = bin_scale(&cb, bins)[axis];
-                let left = |r: &PrimRef| (((r.key()[axis] - cb.min[axis]) * scale) as usize).min(bins - 1) < k;
+                // Partition by bin, left bins first (the same arithmetic as the binning):
+                // for k in 1..bins, [`bin_index`] < k exactly when the offset is not ≥ k
+                // (NaN, bin 0, included), compared on all axes at once and the split
+                // axis's bit taken (no lane extraction or float-to-integer conversion).
+                let scale = bin_scale(&cb, bins_for(n));
+                let kf = Vec3A::splat(k as f32);
+                let left = |r: &PrimRef| bin_offset(r.key(), cb.min, scale).cmpge(kf).bitmask() >> axis & 1 == 0;
                 let (mut i, mut j) = (0usize, n);
                 let [mut lb, mut lc, mut rb, mut rc] = [Aabb::INVALID; 4];
                 while i < j {
@@ -309,6 +347,51 @@ mod tests {
             assert_eq!(b2.nodes.len(), 2 * leaves - 1, "a full binary tree");
             if boxes.len() >= 2000 {
                 assert!(leaves * 2 < boxes.len(), "random boxes share leaves: {leaves} leaves");
+            }
+        }
+    }
+
+    /// [`bin_index`] is the saturating cast it replaced, `(x as usize).min(bins − 1)`, lane
+    /// by lane, on in-range, boundary, out-of-range and non-finite offsets; and the
+    /// partition's test (offset not ≥ k) puts on the left exactly the bins below k.
+    #[test]
+    fn bin_index_is_the_clamped_cast_and_agrees_with_the_partition() {
+        let mut xs = vec![0.0, -0.0, 0.5, 1.0, 7.0, 7.999999, 8.0, 15.5, 16.0, 31.99998, 32.0, 1e9, -1.0, -1e9, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MIN_POSITIVE];
+        let mut z = 5u64;
+        for _ in 0..300 {
+            z = z.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            xs.push((z >> 40) as f32 / (1u64 << 24) as f32 * 40.0 - 4.0);
+        }
+        for bins in [8, 16, BINS] {
+            for w in xs.windows(3) {
+                let got = bin_index(Vec3A::new(w[0], w[1], w[2]), bins);
+                for a in 0..3 {
+                    let want = (w[a] as usize).min(bins - 1);
+                    assert_eq!(got[a] as usize, want, "offset {} of {bins} bins", w[a]);
+                    for k in 1..bins {
+                        let left = Vec3A::new(w[0], w[1], w[2]).cmpge(Vec3A::splat(k as f32)).bitmask() >> a & 1 == 0;
+                        assert_eq!(left, want < k, "offset {} split at {k}", w[a]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// A range of at most MAX_LEAF primitives, made a leaf without binning, is one no split
+    /// would beat: the binned split's cost is never below the leaf's, on random ranges of
+    /// 2..=MAX_LEAF boxes of every size and on coincident ones.
+    #[test]
+    fn small_ranges_never_split_cheaper_than_a_leaf() {
+        let boxes = random_boxes(11, 4000, Vec3A::new(3.0, 0.5, 2.0));
+        let mut ranges: Vec<&[Aabb]> = (2..=MAX_LEAF as usize).flat_map(|n| boxes.chunks_exact(n).take(300)).collect();
+        let same = [Aabb::new(Vec3A::ZERO, Vec3A::ONE); 4];
+        ranges.push(&same);
+        for range in ranges {
+            let refs: Vec<PrimRef> = range.iter().enumerate().map(|(id, b)| PrimRef { bounds: *b, id: id as u32 }).collect();
+            let (nb, cb) = bounds(&refs);
+            let leaf_cost = LEAF_COST * area(&nb) * blocks(refs.len());
+            if let Some((_, _, cost)) = best_split(&refs, &nb, &cb) {
+                assert!(leaf_cost <= cost, "{} boxes: leaf {leaf_cost}, split {cost}", refs.len());
             }
         }
     }
