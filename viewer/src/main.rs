@@ -81,6 +81,14 @@ struct Args {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
     worker_threads: Option<u32>,
 
+    /// Run the local shader workers under Linux's SCHED_IDLE policy as well as at a lower
+    /// niceness (default true): they get only the CPU time the server and this viewer leave,
+    /// and a waking frame-loop thread takes a core from them at once. `false` leaves them at
+    /// the lower niceness only — for a machine where other busy programs would otherwise
+    /// starve the workers.
+    #[arg(long, value_name = "BOOL", default_value_t = true, action = clap::ArgAction::Set)]
+    worker_idle: bool,
+
     /// Directory holding edgepoint-server and edgepoint-worker for the local cluster
     /// (searched first; then EDGEPOINT_BIN_DIR, this executable's directory and its parent,
     /// then PATH).
@@ -453,6 +461,7 @@ fn run(args: Args) -> Result<()> {
             let opts = LocalOptions {
                 workers: args.workers as usize,
                 worker_threads: args.worker_threads.map(|t| t as usize),
+                worker_idle: args.worker_idle,
                 server_args,
                 web: args.web.clone(),
                 bin_dir: args.bin_dir.clone(),

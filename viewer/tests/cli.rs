@@ -22,7 +22,7 @@ fn help_mentions_every_flag() {
     assert!(o.status.success());
     let help = String::from_utf8_lossy(&o.stdout);
     for flag in [
-        "--server", "--local", "--workers", "--worker-threads", "--bin-dir", "--server-arg", "--cluster-log",
+        "--server", "--local", "--workers", "--worker-threads", "--worker-idle", "--bin-dir", "--server-arg", "--cluster-log",
         "--cluster-log-file", "--scene", "--width", "--height", "--shader", "--shader-param", "--encoding",
         "--frames", "--out", "--headless", "--orbit", "--orbit-speed", "--orbit-pivot", "--orbit-radius",
         "--orbit-elevation", "--orbit-start", "--camera", "--camera-path", "--loop-path", "--record-path",
