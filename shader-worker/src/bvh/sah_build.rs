@@ -244,17 +244,15 @@ fn grow(nodes: &mut Vec<Bvh2Node>, refs: &mut [PrimRef], mut todo: Vec<(usize, u
         // LEAF_COST · area(nb) · 1 (NODE_COST ≥ LEAF_COST, asserted below). Every leaf comes
         // from such a range, so this skips as many bin sweeps as there are leaves.
         const { assert!(NODE_COST >= LEAF_COST) };
-        let split = if n > MAX_LEAF as usize { best_split(range, &nb, &cb) } else { None };
-        let leaf_cost = LEAF_COST * area(&nb) * blocks(n);
+        if n <= MAX_LEAF as usize {
+            nodes[node].prim_count = n as u32;
+            nodes[node].first_index = begin as u32;
+            continue;
+        }
         // The children's box and key bounds, gathered by the partition when it runs (one
         // pass over the range fewer per level than measuring them after).
         let mut sides = None;
-        let mid = match split {
-            _ if n <= MAX_LEAF as usize && split.is_none_or(|s| leaf_cost <= s.2) => {
-                nodes[node].prim_count = n as u32;
-                nodes[node].first_index = begin as u32;
-                continue;
-            }
+        let mid = match best_split(range, &nb, &cb) {
             Some((axis, k, _)) => {
                 // Partition by bin, left bins first (the same arithmetic as the binning):
                 // for k in 1..bins, [`bin_index`] < k exactly when the offset is not ≥ k
