@@ -68,6 +68,23 @@ pub struct ReconstructionArgs {
     /// every shadow edge (server default: its --simplify-tolerance, normally 0).
     #[arg(long, value_name = "T", value_parser = parse_tolerance)]
     pub simplify_tolerance: Option<f64>,
+
+    /// Where area lights' shadow edges come from: `triples` (the renderer's edge finder,
+    /// from the light–blocker–receiver triples the workers report; the server's default) or
+    /// `mesh` (the discontinuity mesh of every area light, paper 002: its umbral and
+    /// penumbral boundaries and the interior edges across which the irradiance's slope
+    /// jumps steeply; computed on the session's shadow thread, seconds on big scenes, and
+    /// updated incrementally when an object moves). Point lights' hard shadow edges come
+    /// from the triples either way.
+    #[arg(long, value_enum, value_name = "SOURCE")]
+    pub shadow_edges: Option<ShadowEdgesMode>,
+}
+
+/// `--shadow-edges`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShadowEdgesMode {
+    Triples,
+    Mesh,
 }
 
 fn parse_tolerance(s: &str) -> Result<f64, String> {
@@ -113,6 +130,12 @@ impl ReconstructionArgs {
         }
         if let Some(t) = self.simplify_tolerance {
             s.simplify_tolerance = Some(t);
+        }
+        if let Some(m) = self.shadow_edges {
+            s.shadow_edges = match m {
+                ShadowEdgesMode::Triples => pb::ShadowEdges::Triples,
+                ShadowEdgesMode::Mesh => pb::ShadowEdges::Mesh,
+            } as i32;
         }
     }
 }
@@ -163,6 +186,11 @@ mod tests {
         assert!(Cli::try_parse_from(["x", "--sharp-cutoff", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--sharp-cutoff", "200"]).is_err());
         assert!(Cli::try_parse_from(["x", "--reconstruction", "magic"]).is_err());
+        let m = Cli::parse_from(["x", "--shadow-edges", "mesh"]).r;
+        let mut s = pb::Settings::default();
+        m.apply(&mut s);
+        assert_eq!(s.shadow_edges, pb::ShadowEdges::Mesh as i32);
+        assert!(Cli::try_parse_from(["x", "--shadow-edges", "sometimes"]).is_err());
         let t = Cli::parse_from(["x", "--simplify-tolerance", "0.05"]).r;
         assert!(t.is_set());
         let mut s = pb::Settings::default();

@@ -50,6 +50,21 @@ impl Geometry {
         Geometry::from_objects(&objects)
     }
 
+    /// The scene's objects placed by `transforms` (one per object; an object without one
+    /// keeps its default), as a session has them.
+    pub fn from_scene_at(scene: &Scene, transforms: &[glam::Affine3A]) -> Geometry {
+        let objects: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = scene
+            .objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let t = transforms.get(i).unwrap_or(&o.transform);
+                (o.mesh.positions.iter().map(|p| t.transform_point3(*p).as_dvec3()).collect(), o.mesh.triangles.clone())
+            })
+            .collect();
+        Geometry::from_objects(&objects)
+    }
+
     /// A triangle soup given per object (tests, and objects moved by [`Geometry::moved`]).
     pub fn from_objects(objects: &[(Vec<DVec3>, Vec<[u32; 3]>)]) -> Geometry {
         let mut pos = Vec::new();

@@ -279,4 +279,4 @@ impl DiscontinuityMesh {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

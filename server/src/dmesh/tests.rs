@@ -39,7 +39,7 @@ fn random_scene(r: &mut Rng) -> (Geometry, LightPlane) {
 }
 
 /// `n` random scenes with their light, and the Cornell box with its.
-fn random_scenes_and_cornell(r: &mut Rng, n: usize) -> Vec<(Geometry, Vec<LightPlane>)> {
+pub(crate) fn random_scenes_and_cornell(r: &mut Rng, n: usize) -> Vec<(Geometry, Vec<LightPlane>)> {
     let mut scenes: Vec<(Geometry, Vec<LightPlane>)> = (0..n)
         .map(|_| {
             let (g, l) = random_scene(r);

@@ -14,6 +14,7 @@ pub mod face_bvh;
 pub mod finder;
 pub mod geometric;
 pub mod interval;
+pub mod mesh_edges;
 pub mod sample;
 pub mod shadow;
 pub mod simplify;

@@ -287,6 +287,22 @@ fn segment_meets(p: DVec3, q: DVec3, lo: Vec3, hi: Vec3) -> bool {
     true
 }
 
+/// The width of the penumbra of a light of `diameter` centred at `c` at receiver point `m`
+/// (normal `n`) across an edge cast by the blocker segment `s0`–`s1`: the diameter seen
+/// through the blocker point nearest `m`, D |m − s| / |s − c|, stretched by the receiver's
+/// slant (1 / cos, at most 4×); 0 where the blocker touches the receiver (contact
+/// hardening, paper 000 §6). Shared by the renderer's own shadow edges
+/// ([`SceneLights::penumbra_width`]) and the discontinuity mesh's ([`super::mesh_edges`]).
+pub fn penumbra_width_of(diameter: f64, c: DVec3, m: DVec3, n: DVec3, s0: DVec3, s1: DVec3) -> f64 {
+    let dist = (m - c).length();
+    let d = s1 - s0;
+    let u = if d.length_squared() > 0.0 { ((m - s0).dot(d) / d.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+    let s = s0 + d * u;
+    let penumbra = diameter * (m - s).length() / (s - c).length().max(1e-12);
+    let slant = (n.dot(c - m) / dist.max(1e-12)).abs().max(0.25);
+    penumbra / slant
+}
+
 /// The scene as the estimate needs it: its lights, and every object's faces (object space,
 /// in its face hierarchy) at its current transform.
 pub struct SceneLights<'a> {
@@ -458,8 +474,6 @@ impl<'a> SceneLights<'a> {
     /// (contact hardening, paper 000 §6).
     pub fn penumbra_width(&self, k: usize, m: DVec3, n: DVec3, s0: DVec3, s1: DVec3) -> f64 {
         let light = &self.lights[k];
-        let c = light.center().as_dvec3();
-        let dist = (m - c).length();
         let diameter = match light {
             Light::Area { vertices, .. } => vertices
                 .iter()
@@ -467,12 +481,7 @@ impl<'a> SceneLights<'a> {
                 .fold(0.0, f64::max),
             _ => 0.0,
         };
-        let d = s1 - s0;
-        let u = if d.length_squared() > 0.0 { ((m - s0).dot(d) / d.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
-        let s = s0 + d * u;
-        let penumbra = diameter * (m - s).length() / (s - c).length().max(1e-12);
-        let slant = (n.dot(c - m) / dist.max(1e-12)).abs().max(0.25);
-        penumbra / slant
+        penumbra_width_of(diameter, light.center().as_dvec3(), m, n, s0, s1)
     }
 
     /// The penumbra across shadow edge `e` of light `k` (blocker points `s0`–`s1`) at its

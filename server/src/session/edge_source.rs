@@ -25,6 +25,13 @@
 //!   on screen goes to the EPI as a barrier ([`crate::epi::soft`]), and interpolation
 //!   crosses the rest (a soft shadow's boundary is continuous). Hard edges go whole.
 //!
+//! - The discontinuity mesh (`--shadow-edges mesh`, issue 15 item 4): the shadow thread
+//!   also keeps the mesh of every area light ([`super::mesh_shadows`]), built once and
+//!   updated incrementally after each move, and its extremal and steep interior edges
+//!   replace the finder's area-light shadow edges; point lights' hard edges still come
+//!   from the finder. Until the mesh is built (seconds on a big scene) and while an update
+//!   runs, the finder's edges or the mesh's older ones stay up.
+//!
 //! Both the build and the updates run on the [`crate::background`] pool, never on the
 //! global pool the frame loop's per-pixel passes use.
 use super::TripleKey;
@@ -32,7 +39,8 @@ use crate::edges::brute::scene_edges;
 use crate::edges::finder::{GeometricFinder, SceneEdgeIndex, ShadowFinder, ViewVolume};
 use crate::edges::shadow::ShadowUpdateStats;
 use crate::edges::simplify::EdgeErrors;
-use crate::edges::EdgeSegment;
+use crate::edges::{EdgeKind, EdgeSegment};
+use super::mesh_shadows::MeshShadows;
 use crate::epi::raster::SegmentProjector;
 use crate::epi::soft::append_barriers;
 use edgepoint_scene::{Progress, Scene};
@@ -78,6 +86,7 @@ struct Running {
     posted_transforms: Vec<Affine3A>,
     posted_triples: usize,
     posted_tolerance: f64,
+    posted_mesh: bool,
 }
 
 impl SessionEdges {
@@ -121,13 +130,14 @@ impl SessionEdges {
         triples: &dyn TripleSet,
         sharp_cutoff_degrees: f32,
         simplify_tolerance: f64,
+        mesh_shadow_edges: bool,
         screen: Option<&SegmentProjector>,
         out: &mut Vec<EdgeSegment>,
     ) -> EdgeSourceStats {
         out.clear();
         if self.running.is_none() {
             if let Ok(index) = self.ready.try_recv() {
-                self.running = Running::start(index);
+                self.running = Running::start(index, self.scene.clone());
             }
         }
         let Some(r) = &mut self.running else {
@@ -135,12 +145,13 @@ impl SessionEdges {
             return EdgeSourceStats::default();
         };
         r.geometric.edges(transforms, eye, Some(view), sharp_cutoff_degrees, out);
-        if r.posted_transforms != transforms || r.posted_triples != triples.len() || r.posted_tolerance != simplify_tolerance {
+        if r.posted_transforms != transforms || r.posted_triples != triples.len() || r.posted_tolerance != simplify_tolerance || r.posted_mesh != mesh_shadow_edges {
             r.posted_transforms.clear();
             r.posted_transforms.extend_from_slice(transforms);
             r.posted_triples = triples.len();
             r.posted_tolerance = simplify_tolerance;
-            r.shadows.post(ShadowJob { transforms: transforms.to_vec(), triples: triples.keys(), simplify_tolerance });
+            r.posted_mesh = mesh_shadow_edges;
+            r.shadows.post(ShadowJob { transforms: transforms.to_vec(), triples: triples.keys(), simplify_tolerance, mesh: mesh_shadow_edges });
         }
         let mut stats = EdgeSourceStats { trees: true, ..Default::default() };
         if let Some((result, ms)) = r.shadows.take() {
@@ -174,8 +185,8 @@ impl<V> TripleSet for std::collections::HashMap<TripleKey, V> {
 }
 
 impl Running {
-    fn start(index: Arc<SceneEdgeIndex>) -> Option<Running> {
-        let shadows = ShadowThread::spawn(ShadowFinder::new(index.clone()))?;
+    fn start(index: Arc<SceneEdgeIndex>, scene: Arc<Scene>) -> Option<Running> {
+        let shadows = ShadowThread::spawn(ShadowFinder::new(index.clone()), scene)?;
         Some(Running {
             geometric: GeometricFinder::new(index),
             shadows,
@@ -183,6 +194,7 @@ impl Running {
             posted_transforms: Vec::new(),
             posted_triples: usize::MAX,
             posted_tolerance: 0.0,
+            posted_mesh: false,
         })
     }
 }
@@ -192,6 +204,8 @@ struct ShadowJob {
     transforms: Vec<Affine3A>,
     triples: Vec<TripleKey>,
     simplify_tolerance: f64,
+    /// Area-light shadow edges from the discontinuity mesh.
+    mesh: bool,
 }
 
 /// What the shadow thread publishes: the stored shadow edges that go to the EPI, world
@@ -219,6 +233,13 @@ pub fn chosen_shadow_edges<T: Copy>(errors: &[(T, f64)], tolerance: f64, out: &m
     errors.len() - (out.len() - before)
 }
 
+/// The finder's shadow edges with the area lights' replaced by the mesh's: point lights'
+/// hard edges stay.
+fn with_mesh_edges(segments: &mut Vec<(EdgeSegment, [Vec3; 2])>, mesh: &[(EdgeSegment, [Vec3; 2])]) {
+    segments.retain(|(e, _)| !matches!(e.kind, EdgeKind::ShadowUmbral | EdgeKind::ShadowPenumbral));
+    segments.extend_from_slice(mesh);
+}
+
 /// Between the frame loop and the shadow thread: the newest job (an older one not yet
 /// started is replaced) and the newest result with the time the updates took.
 #[derive(Default)]
@@ -234,9 +255,11 @@ struct ShadowThread {
 }
 
 impl ShadowThread {
-    fn spawn(mut finder: ShadowFinder) -> Option<ShadowThread> {
+    fn spawn(mut finder: ShadowFinder, scene: Arc<Scene>) -> Option<ShadowThread> {
         let shared: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
         let mut errors = EdgeErrors::new();
+        // The mesh, once a job asks for it; `Err(())` once a build found no area light.
+        let mut mesh: Option<Result<MeshShadows, ()>> = None;
         let s = shared.clone();
         let thread = std::thread::Builder::new()
             .name("shadow-edges".into())
@@ -254,11 +277,24 @@ impl ShadowThread {
                         m = cv.wait(m).unwrap_or_else(|p| p.into_inner());
                     }
                 };
-                let publish = |result: ShadowResult, ms: f64| {
+                let publish_now = |result: ShadowResult, ms: f64| {
                     let mut m = s.0.lock().unwrap_or_else(|p| p.into_inner());
                     // Updates the frame loop has not taken yet add up: it reports their time.
                     let earlier = m.result.take().map_or(0.0, |r| r.1);
                     m.result = Some((Arc::new(result), earlier + ms));
+                };
+                // With the mesh, the finder's area-light edges give way to the mesh's (when
+                // it is there for these transforms; else they show meanwhile).
+                let mesh_ready = job.mesh && matches!(&mesh, Some(Ok(m)) if m.at(&job.transforms));
+                // The finder's edges last published, for the mesh's to join below.
+                let (mut finder_edges, mut finder_simplified) = (Vec::new(), 0);
+                let mut publish = |mut result: ShadowResult, ms: f64| {
+                    finder_edges.clone_from(&result.segments);
+                    finder_simplified = result.simplified;
+                    if let (true, Some(Ok(m))) = (mesh_ready, &mesh) {
+                        with_mesh_edges(&mut result.segments, &m.edges);
+                    }
+                    publish_now(result, ms);
                 };
                 let (stats, ms) = crate::background::pool().install(|| {
                     finder.set_transforms(&job.transforms);
@@ -285,6 +321,21 @@ impl ShadowThread {
                 } else {
                     let segments = crate::background::pool().install(|| finder.with_penumbrae());
                     publish(ShadowResult { segments, stats, simplified: 0, tolerance }, ms);
+                }
+                if job.mesh && !mesh_ready && !matches!(mesh, Some(Err(()))) {
+                    // Built or brought to the job's transforms, then published again.
+                    let t = Instant::now();
+                    crate::background::pool().install(|| match &mut mesh {
+                        Some(Ok(m)) => {
+                            m.sync(&job.transforms);
+                        }
+                        _ => mesh = Some(MeshShadows::build(&scene, &job.transforms).ok_or(())),
+                    });
+                    if let Some(Ok(m)) = &mesh {
+                        let mut segments = finder_edges;
+                        with_mesh_edges(&mut segments, &m.edges);
+                        publish_now(ShadowResult { segments, stats, simplified: finder_simplified, tolerance }, t.elapsed().as_secs_f64() * 1e3);
+                    }
                 }
             })
             .map_err(|e| tracing::error!("cannot start the shadow-edge thread ({e}); no shadow edges in this session"))
@@ -351,7 +402,7 @@ mod tests {
         let deadline = Instant::now() + Duration::from_secs(60);
         let mut out = Vec::new();
         loop {
-            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, tolerance, None, &mut out);
+            let st = edges.find(t, scene.camera.eye, &view(scene), triples, 85.0, tolerance, false, None, &mut out);
             if done(&st, &out) {
                 return (out, st);
             }
@@ -382,7 +433,7 @@ mod tests {
         }
         // Whatever finder is in use, the geometric edges are the brute-force ones.
         let mut first = Vec::new();
-        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, 0.0, None, &mut first);
+        edges.find(&t, scene.camera.eye, &view(&scene), &triples, 85.0, 0.0, false, None, &mut first);
         let mut brute = Vec::new();
         scene_edges(&scene, &t, scene.camera.eye, 85.0, &mut brute);
         let geo = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| s.kind.is_geometric()).collect::<Vec<_>>());
@@ -429,6 +480,40 @@ mod tests {
         assert!(st.shadow_simplified > n / 2, "{} of {n} left out", st.shadow_simplified);
         let back = run_until(&mut edges, &scene, &moved, &triples, |st, _| st.shadow_tolerance == 0.0);
         assert_eq!(shadows(&back), want_moved);
+    }
+
+    /// `--shadow-edges mesh`: the shadow thread publishes the discontinuity mesh's edges
+    /// (with no triples at all), and after a move the mesh brought there incrementally.
+    #[test]
+    fn the_mesh_gives_the_area_light_shadow_edges_and_follows_a_move() {
+        let scene = Arc::new(edgepoint_scene::builtin::load("cornell").unwrap());
+        let mut edges = SessionEdges::new(scene.clone(), Arc::default(), Box::new(NoProgress));
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let none: HashMap<TripleKey, ()> = HashMap::new();
+        let shadows = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| !s.kind.is_geometric()).collect::<Vec<_>>());
+        let mut direct = MeshShadows::build(&scene, &t).expect("cornell has an area light");
+        let want = shadows(&direct.edges.iter().map(|e| e.0).collect::<Vec<_>>());
+        assert!(!want.is_empty());
+        let until = |edges: &mut SessionEdges, t: &[Affine3A], want: &[(u32, EdgeKind, [i64; 6])]| {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            let mut out = Vec::new();
+            loop {
+                edges.find(t, scene.camera.eye, &view(&scene), &none, 85.0, 0.0, true, None, &mut out);
+                if shadows(&out) == want {
+                    return;
+                }
+                assert!(Instant::now() < deadline, "mesh edges did not arrive: {} of {}", shadows(&out).len(), want.len());
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        };
+        until(&mut edges, &t, &want);
+        let mut moved = t.clone();
+        let short = scene.object_id("shortbox").unwrap() as usize;
+        moved[short] = Affine3A::from_translation(Vec3::new(0.04, 0.0, -0.03)) * t[short];
+        assert!(direct.sync(&moved));
+        let want_moved = shadows(&direct.edges.iter().map(|e| e.0).collect::<Vec<_>>());
+        assert_ne!(want_moved, want, "the short box's shadow moved");
+        until(&mut edges, &moved, &want_moved);
     }
 
     /// Tolerance 0 is off: every edge goes to the EPI, whatever its estimate (even 0).

@@ -377,6 +377,7 @@ impl FrameLoop {
                 &self.feedback.triples,
                 s.sharp_cutoff_degrees,
                 s.simplify_tolerance,
+                s.mesh_shadow_edges,
                 Some(&SegmentProjector::new(&self.cam_frame, self.width as usize, self.height as usize)),
                 &mut self.edges,
             );

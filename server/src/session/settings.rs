@@ -58,6 +58,9 @@ pub struct SessionSettings {
     /// Shadow edges whose estimated error of leaving them out is below this are left out
     /// of the EPI (paper 003, [`crate::edges::simplify`]); 0: off.
     pub simplify_tolerance: f64,
+    /// Area-light shadow edges from the discontinuity mesh ([`crate::edges::mesh_edges`])
+    /// instead of the triples' edge finder.
+    pub mesh_shadow_edges: bool,
 }
 
 impl Default for SessionSettings {
@@ -74,6 +77,7 @@ impl Default for SessionSettings {
             overlay: Overlay::None,
             sharp_cutoff_degrees: crate::edges::DEFAULT_SHARP_CUTOFF_DEGREES,
             simplify_tolerance: 0.0,
+            mesh_shadow_edges: false,
         }
     }
 }
@@ -128,6 +132,12 @@ impl SessionSettings {
                 return Err(format!("settings.simplify_tolerance must be in [{lo}, {hi}] (0 = off), got {v}"));
             }
             out.simplify_tolerance = v;
+        }
+        match pb::ShadowEdges::try_from(s.shadow_edges) {
+            Ok(pb::ShadowEdges::Unspecified) => {}
+            Ok(pb::ShadowEdges::Triples) => out.mesh_shadow_edges = false,
+            Ok(pb::ShadowEdges::Mesh) => out.mesh_shadow_edges = true,
+            Err(_) => return Err(format!("settings.shadow_edges {} is not a known ShadowEdges (0 to keep)", s.shadow_edges)),
         }
         if s.set_paused {
             out.paused = s.paused;
@@ -251,6 +261,10 @@ mod tests {
         assert_eq!(simp.simplify_tolerance, 0.05);
         assert_eq!(simp.with(&pb::Settings::default()).unwrap().simplify_tolerance, 0.05, "unset keeps");
         assert_eq!(simp.with(&pb::Settings { simplify_tolerance: Some(0.0), ..Default::default() }).unwrap().simplify_tolerance, 0.0, "0 turns it off");
+        let mesh = r.with(&pb::Settings { shadow_edges: pb::ShadowEdges::Mesh as i32, ..Default::default() }).unwrap();
+        assert!(mesh.mesh_shadow_edges && !r.mesh_shadow_edges);
+        assert!(mesh.with(&pb::Settings::default()).unwrap().mesh_shadow_edges, "unspecified keeps");
+        assert!(!mesh.with(&pb::Settings { shadow_edges: pb::ShadowEdges::Triples as i32, ..Default::default() }).unwrap().mesh_shadow_edges);
         let back = r.with(&pb::Settings { reconstruction: 1, overlay: 1, complex_filter: Some(true), ..Default::default() }).unwrap();
         assert_eq!((back.reconstruction, back.overlay, back.complex_filter), (Reconstruction::EdgeAndPoint, Overlay::None, true));
         for bad in [
@@ -262,6 +276,7 @@ mod tests {
             pb::Settings { simplify_tolerance: Some(-0.1), ..Default::default() },
             pb::Settings { simplify_tolerance: Some(f64::NAN), ..Default::default() },
             pb::Settings { simplify_tolerance: Some(1e3), ..Default::default() },
+            pb::Settings { shadow_edges: 3, ..Default::default() },
         ] {
             let e = s.with(&bad).unwrap_err();
             assert!(e.starts_with("settings."), "{e}");
