@@ -50,15 +50,42 @@ pub const OUTSTANDING_FRAMES: usize = 4;
 pub const TARGET_SAMPLE_LATENCY: Duration = Duration::from_millis(100);
 
 /// Requests allowed in flight: between one frame's budget and [`OUTSTANDING_FRAMES`] of
-/// them, and no more than the workers shade in [`TARGET_SAMPLE_LATENCY`] at their measured
-/// `rate` (samples per second; 0 = not measured yet).
-pub fn max_outstanding(per_frame: usize, rate: f64) -> usize {
+/// them (times `frames`, see [`rest_frames`]), and no more than the workers shade at their
+/// measured `rate` (samples per second; 0 = not measured yet) in [`TARGET_SAMPLE_LATENCY`]
+/// plus `refill`, the time until the next frame's requests go out.
+///
+/// In motion `refill` is zero and `frames` one. At rest the frame loop sends requests only
+/// once a rest period (`rest_fps`), so what is in flight after a frame must keep the
+/// workers busy for that period and then for the round trip of the next frame's requests.
+/// Without `refill` the bound cannot grow: the rate it is measured from is what the bound
+/// let through (at most the bound per period, so `rate` × 100 ms equals the bound at a 10
+/// fps rest pace, a fixed point at whatever it started with, and any latency pulls it
+/// down), and at rest it sat at one frame's budget per frame — on `cornell` 41k samples/s
+/// against the 300k/s the same workers shade for a progressive renderer.
+///
+/// Until the rate is measured (a session's first frames), [`OUTSTANDING_FRAMES`] of the
+/// budget, at rest too: more ahead of the first samples would only delay the first image.
+pub fn max_outstanding(per_frame: usize, rate: f64, refill: Duration, frames: usize) -> usize {
     let most = per_frame * OUTSTANDING_FRAMES;
     if rate <= 0.0 || !rate.is_finite() {
         return most;
     }
-    ((rate * TARGET_SAMPLE_LATENCY.as_secs_f64()) as usize).clamp(per_frame, most)
+    ((rate * (TARGET_SAMPLE_LATENCY + refill).as_secs_f64()) as usize).clamp(per_frame, most * frames.max(1))
 }
+
+/// The most interactive frame periods a rest period stands for (its budget of requests in
+/// flight is that many frames' worth, so requests per second at rest may match those in
+/// motion), at most [`MAX_REST_FRAMES`]: the request ring is sized for it.
+pub fn rest_frames(s: &SessionSettings) -> usize {
+    if s.rest_fps < s.max_fps && s.rest_fps > 0.0 {
+        ((s.max_fps / s.rest_fps).ceil() as usize).clamp(1, MAX_REST_FRAMES)
+    } else {
+        1
+    }
+}
+
+/// Bound of [`rest_frames`] (4: the default 30 and 10 fps take 3).
+pub const MAX_REST_FRAMES: usize = 4;
 
 /// Frames the camera and the objects must have stayed still before the session samples at
 /// the workers' pace instead of its interactive budget (about a quarter of a second at 30
@@ -304,7 +331,12 @@ impl FrameLoop {
         let per_frame = self.settings.frame_budget(pixels);
         // The dispatcher counts parts; the budget counts samples (pixels shaded whole).
         let parts = self.split.parts() as f64;
-        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second() / parts);
+        let (refill, frames) = if self.still_frames >= REST_AFTER_FRAMES {
+            (frame_periods(&self.settings, self.still_frames).1, rest_frames(&self.settings))
+        } else {
+            (Duration::ZERO, 1)
+        };
+        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second() / parts, refill, frames);
         let outstanding = self.dispatcher.outstanding_requests() as usize / parts as usize;
         let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
         self.still_frames = self.still_frames.saturating_add(1);
@@ -813,11 +845,47 @@ mod tests {
 
     #[test]
     fn outstanding_follows_the_measured_rate_within_bounds() {
-        assert_eq!(max_outstanding(1000, 0.0), 4000, "unmeasured: four frames");
-        assert_eq!(max_outstanding(1000, 25_000.0), 2500, "100 ms of work at 25k samples/s");
-        assert_eq!(max_outstanding(1000, 1_000.0), 1000, "never below one frame");
-        assert_eq!(max_outstanding(1000, 1e9), 4000, "never above four frames");
-        assert_eq!(max_outstanding(1000, f64::NAN), 4000);
+        let z = Duration::ZERO;
+        assert_eq!(max_outstanding(1000, 0.0, z, 1), 4000, "unmeasured: four frames");
+        assert_eq!(max_outstanding(1000, 25_000.0, z, 1), 2500, "100 ms of work at 25k samples/s");
+        assert_eq!(max_outstanding(1000, 1_000.0, z, 1), 1000, "never below one frame");
+        assert_eq!(max_outstanding(1000, 1e9, z, 1), 4000, "never above four frames");
+        assert_eq!(max_outstanding(1000, f64::NAN, z, 1), 4000);
+    }
+
+    #[test]
+    fn at_rest_the_bound_covers_the_rest_period_and_grows_to_the_workers_rate() {
+        let rest = Duration::from_millis(100);
+        assert_eq!(max_outstanding(1000, 25_000.0, rest, 3), 5000, "200 ms of work at 25k samples/s");
+        assert_eq!(max_outstanding(1000, 1e9, rest, 3), 12_000, "never above four frames per interactive period");
+        assert_eq!(max_outstanding(1000, 1e9, rest, 0), 4000, "frames count at least one");
+        assert_eq!(max_outstanding(1000, 0.0, rest, 3), 4000, "unmeasured: four frames, at rest too");
+        // Requests go out once per rest period, the measured rate is what the bound let
+        // through; when the workers answer within the period, the bound doubles each period
+        // until it reaches what the workers can shade (here 300k/s, 60k in 200 ms).
+        let (capacity, per_frame) = (300_000.0f64, 4096usize);
+        let mut bound = per_frame;
+        for _ in 0..20 {
+            let rate = (bound as f64 / rest.as_secs_f64()).min(capacity);
+            bound = max_outstanding(per_frame, rate, rest, 4);
+        }
+        assert_eq!(bound, 60_000, "the workers' rate times 200 ms");
+        // Without the rest period in the bound (as in motion) it stays where it started.
+        let mut stuck = per_frame;
+        for _ in 0..20 {
+            stuck = max_outstanding(per_frame, stuck as f64 / rest.as_secs_f64(), Duration::ZERO, 4);
+        }
+        assert_eq!(stuck, per_frame);
+    }
+
+    #[test]
+    fn a_rest_period_stands_for_its_interactive_frames_at_most_four() {
+        let s = SessionSettings::default();
+        assert_eq!((s.max_fps, s.rest_fps), (30.0, 10.0));
+        assert_eq!(rest_frames(&s), 3);
+        assert_eq!(rest_frames(&SessionSettings { rest_fps: 30.0, ..s }), 1, "pacing off");
+        assert_eq!(rest_frames(&SessionSettings { rest_fps: 12.0, ..s }), 3, "2.5 periods round up");
+        assert_eq!(rest_frames(&SessionSettings { rest_fps: 0.1, ..s }), MAX_REST_FRAMES);
     }
 
     #[test]
