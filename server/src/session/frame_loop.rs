@@ -741,7 +741,8 @@ impl FrameLoop {
                 let swept = || since().filter(|e| e.object == m.object).any(|e| l.may_shadow(p, e.region));
                 match bvh {
                     Some(bvh) if l.radius == 0.0 => {
-                        if segment_blocked(bvh, &m.from.inverse(), p, l.center) != segment_blocked(bvh, &now.inverse(), p, l.center) {
+                        let (then, now) = (segment_blocked(bvh, &m.from.inverse(), p, l.center), segment_blocked(bvh, &now.inverse(), p, l.center));
+                        if then != now {
                             return ShadowChange::Changed;
                         }
                     }

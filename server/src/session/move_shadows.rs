@@ -11,6 +11,7 @@
 use crate::edges::face_bvh::FaceBvh;
 use crate::render_cache::reshadow::{ShadowChange, ShadowQuery};
 use crate::render_cache::{segment_hits_box, LightBound};
+use edgepoint_scene::geometry::ray_triangle;
 use edgepoint_scene::{NoProgress, Scene};
 use glam::{Affine3A, Vec3};
 
@@ -59,30 +60,11 @@ pub fn segment_blocked(bvh: &FaceBvh, to_object: &Affine3A, a: Vec3, b: Vec3) ->
     !bvh.visit(|lo, hi| segment_hits_box(oa, ob, lo - grow, hi + grow), |f| !segment_hits_triangle(oa, ob, f.v))
 }
 
-/// Möller–Trumbore for the segment `a`–`b`: whether it crosses the triangle at a parameter
-/// in (`END_MARGIN`, 1 − `END_MARGIN`). Edges and corners count as inside.
+/// Whether the segment `a`–`b` crosses the triangle at a parameter in (`END_MARGIN`,
+/// 1 − `END_MARGIN`) (Möller–Trumbore, [`ray_triangle`], with the segment as the ray's
+/// direction, so that `t` is the segment's parameter). Edges and corners count as inside.
 pub fn segment_hits_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool {
-    let d = b - a;
-    let (e1, e2) = (v1 - v0, v2 - v0);
-    let pv = d.cross(e2);
-    let det = e1.dot(pv);
-    // Parallel to the plane (or a degenerate triangle): no crossing.
-    if det.abs() <= 1e-12 * d.length_squared().max(1e-30).sqrt() * e1.length() * e2.length() {
-        return false;
-    }
-    let inv = 1.0 / det;
-    let tv = a - v0;
-    let u = tv.dot(pv) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return false;
-    }
-    let qv = tv.cross(e1);
-    let v = d.dot(qv) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return false;
-    }
-    let t = e2.dot(qv) * inv;
-    t > END_MARGIN && t < 1.0 - END_MARGIN
+    ray_triangle(a, b - a, v0, v1, v2).is_some_and(|t| t > END_MARGIN && t < 1.0 - END_MARGIN)
 }
 
 /// The change a move of one object from one place to another made to a point's shadows: the
