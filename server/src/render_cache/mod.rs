@@ -20,6 +20,7 @@
 mod converge;
 pub mod fresh;
 pub mod holes;
+pub mod reshadow;
 mod interpolate;
 mod reproject;
 
@@ -632,15 +633,22 @@ impl RenderCache {
         let mut sorted = objects.to_vec();
         sorted.sort_unstable();
         sorted.dedup();
+        let p = &self.pool;
+        let slots: Vec<u32> = (0..self.capacity as u32)
+            .filter(|&i| p.flags[i as usize] & FLAG_VALID != 0 && sorted.binary_search(&p.object[i as usize]).is_ok())
+            .collect();
+        self.drop_points(&slots);
+    }
+
+    /// Drops the points in `slots` (valid ones, each once): their slots become free for new
+    /// samples, and the next reprojection redoes every pixel.
+    pub(crate) fn drop_points(&mut self, slots: &[u32]) {
         self.reproject_all = true;
-        for i in 0..self.capacity {
-            let p = &mut self.pool;
-            if p.flags[i] & FLAG_VALID != 0 && sorted.binary_search(&p.object[i]).is_ok() {
-                p.flags[i] = 0;
-                let r = self.region_of(i as u32);
-                self.regions[r].free.push(i as u32);
-                self.valid -= 1;
-            }
+        for &i in slots {
+            self.pool.flags[i as usize] = 0;
+            let r = self.region_of(i);
+            self.regions[r].free.push(i);
+            self.valid -= 1;
         }
         // Reuse lowest slots first, as after construction.
         for r in &mut self.regions {

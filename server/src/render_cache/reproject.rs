@@ -517,8 +517,13 @@ fn cull_pixel(c: &RowContext, y: usize, x: usize, r: &mut Row) -> bool {
     if let Some(g) = &c.geometry {
         let i = y * w + x;
         // Behind every surface around the pixel, or a background miss on a surface:
-        // hidden, whatever the neighbouring points say.
-        let hidden = if dc < f32::INFINITY { dc > g.far3[i] * (1.0 + GEOMETRY_CULL_RELATIVE) } else { g.inverse_depth[i] > 0.0 };
+        // hidden, whatever the neighbouring points say. Near a silhouette, behind the
+        // surfaces of the four pixel centres around the point's own place in the pixel.
+        let hidden = if dc < f32::INFINITY {
+            dc > g.far3[i] * (1.0 + GEOMETRY_CULL_RELATIVE) || behind_its_corner(g, &c.proj[key as u32 as usize], w, h, x, y, dc)
+        } else {
+            g.inverse_depth[i] > 0.0
+        };
         if hidden {
             st[x] = STATUS_CULLED;
             return false;
@@ -535,6 +540,32 @@ fn cull_pixel(c: &RowContext, y: usize, x: usize, r: &mut Row) -> bool {
     pt[x] = key as u32;
     dp[x] = dc;
     true
+}
+
+/// Whether a point at depth `dc` in pixel (x, y), projected at `pr`, lies behind the
+/// surfaces at all four pixel centres around its place in the pixel (the centres of the
+/// pixel and of its neighbours on the side of each axis it lies on), by more than
+/// [`GEOMETRY_CULL_RELATIVE`]. On one plane 1/z is affine across the image, so between
+/// those centres the plane is no farther than the farthest of them: a point behind all four
+/// is hidden. `far3` (nine centres) keeps every point within a pixel of a nearer surface's
+/// silhouette, and a point of the surface behind it that the silhouette's move put on the
+/// silhouette's near side stayed there — a moved box's top row kept the wall points it slid
+/// over, and drew notches in its edge (issue 11). Only a point behind the surface at its own
+/// pixel's centre can be; at the image's border the pixel's own centre stands for the one
+/// beyond it.
+#[inline(always)]
+fn behind_its_corner(g: &GeometryCull, pr: &Projected, w: usize, h: usize, x: usize, y: usize, dc: f32) -> bool {
+    let i = y * w + x;
+    let t = 1.0 + GEOMETRY_CULL_RELATIVE;
+    let own = g.inverse_depth[i];
+    // Not behind the surface at its own centre (or none there): not hidden.
+    if !(own > 0.0 && dc * own > t) {
+        return false;
+    }
+    let nx = if pr.fx < 0x8000 { x.saturating_sub(1) } else { (x + 1).min(w - 1) };
+    let ny = if pr.fy < 0x8000 { y.saturating_sub(1) } else { (y + 1).min(h - 1) };
+    // Behind a centre's surface: depth × its 1/z above the threshold (0: uncovered, never).
+    [ny * w + x, y * w + nx, ny * w + nx].iter().all(|&j| dc * g.inverse_depth[j] > t)
 }
 
 /// The point image at pixel `x` of the row for its kept point `pt[x]`.

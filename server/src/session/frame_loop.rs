@@ -20,6 +20,8 @@ use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
+use super::move_shadows::{segment_blocked, MoveQuery, MoveShadows};
+use crate::render_cache::reshadow::ShadowChange;
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
@@ -140,6 +142,9 @@ pub struct SessionCounters {
     pub carried: u64,
     /// Hits without an object-space position whose object moved since (not inserted).
     pub stale_dropped: u64,
+    /// Cached points dropped, and samples not inserted, because a move since they were
+    /// shaded changed their shadow from a point light (their shading is wrong now).
+    pub shadow_changed: u64,
     /// Answers whose request the session no longer remembers, or with an unknown object.
     pub unmatched: u64,
     /// Samples with non-finite values (not inserted).
@@ -174,9 +179,11 @@ pub(super) struct FrameLoop {
     normal_to_world: Vec<glam::Mat3A>,
     /// The lights as shadow tests see them.
     lights: Vec<LightBound>,
-    /// The world boxes swept by recent moves (old and new place), with their epochs, newest
-    /// last: a sample shaded before a move whose box can shadow it arrives stale.
-    recent_moves: std::collections::VecDeque<(u64, (glam::Vec3, glam::Vec3))>,
+    /// Recent moves, newest last: a sample shaded before one of them arrives stale, or is
+    /// dropped where the move changed its shadow from a point light ([`Self::shading_since`]).
+    recent_moves: std::collections::VecDeque<RecentMove>,
+    /// The moved objects' face hierarchies, for exact point-light shadow tests.
+    move_shadows: MoveShadows,
     cache: RenderCache,
     /// The exact primary visibility of the frame: what reprojection culls against.
     visibility: Visibility,
@@ -255,6 +262,7 @@ impl FrameLoop {
             normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
             lights: p.scene.lights.iter().map(light_bound).collect(),
             recent_moves: std::collections::VecDeque::new(),
+            move_shadows: MoveShadows::new(objects),
             cache,
             visibility: Visibility::new(p.width, p.height),
             epi: Epi::new(p.width, p.height),
@@ -622,17 +630,21 @@ impl FrameLoop {
         self.normal_to_world[id as usize] = normal_matrix(&t);
         self.last_move_epoch = self.epoch;
         // The object's points go with it (their shading is aged: it was computed in the old
-        // place), and the points it can shadow, in its old place or its new one, are aged
-        // too (DESIGN.md "Motion"): prioritized sampling re-shades them first.
+        // place). Of the points it can shadow, in its old place or its new one, those whose
+        // shadow from a point light it changed are dropped (wrong now), those it may have
+        // changed (area lights) are aged (DESIGN.md "Motion"): prioritized sampling
+        // re-shades them first. The others are as right as before.
         self.cache.move_object(id, &from, &t);
         let bounds = self.scene.objects[id as usize].mesh.bounds;
         let (a, b) = (transformed_box(&from, bounds), transformed_box(&t, bounds));
         let region = (a.0.min(b.0), a.1.max(b.1));
-        self.cache.age_shadowed_by(region, &self.lights);
+        self.move_shadows.prepare(&self.scene, id);
+        let query = MoveQuery::new(self.move_shadows.get(id), &from, &t, &self.lights);
+        self.counters.shadow_changed += self.cache.reshadow(region, &self.lights, &query).dropped as u64;
         if self.recent_moves.len() >= RECENT_MOVES {
             self.recent_moves.pop_front();
         }
-        self.recent_moves.push_back((self.epoch, region));
+        self.recent_moves.push_back(RecentMove { epoch: self.epoch, object: id, from, region });
     }
 
     /// Drains answers from the workers into the cache (with those already taken); returns
@@ -676,9 +688,18 @@ impl FrameLoop {
                         self.counters.unmatched += 1;
                         continue;
                     }
-                    // Shaded before a move that can shadow it: right place, stale shading.
-                    if b.epoch < self.last_move_epoch {
-                        stale = self.shadowed_since(b.epoch, position);
+                    // Shaded before a move that changed its shadow from a point light: wrong
+                    // now, never shown; that may have changed it: right place, stale shading.
+                    // (A sample of a moved object itself is stale anyway, below.)
+                    if b.epoch < self.last_move_epoch && self.moved_at[o as usize] <= b.epoch {
+                        match self.shading_since(b.epoch, position) {
+                            ShadowChange::Changed => {
+                                self.counters.shadow_changed += 1;
+                                continue;
+                            }
+                            ShadowChange::Unknown => stale = true,
+                            ShadowChange::Unchanged => {}
+                        }
                     }
                     // The object moved after the sample was requested: the hit is carried to
                     // the object's current place (DESIGN.md "Motion"), its shading aged.
@@ -730,16 +751,40 @@ impl FrameLoop {
         inserted
     }
 
-    /// Whether a point shaded at `epoch` may be shadowed differently now: a move since then
-    /// swept a box that a shadow ray from it can cross (or the moves since then are no
-    /// longer remembered).
-    fn shadowed_since(&self, epoch: u64, p: glam::Vec3) -> bool {
-        if self.recent_moves.front().is_none_or(|&(e, _)| e > epoch + 1) && epoch < self.last_move_epoch {
-            return true;
+    /// What the moves since `epoch` did to the shadows at `p`, a point on an object that has
+    /// not moved since: [`ShadowChange::Changed`] where an object that moved blocks a point
+    /// light's segment in its place at `epoch` and not now, or now and not then (exact, with
+    /// the object's triangles); [`ShadowChange::Unknown`] where a move swept a box a shadow
+    /// ray toward another light can cross, or for an object without an exact test, or when
+    /// the moves since `epoch` are no longer all remembered.
+    fn shading_since(&self, epoch: u64, p: glam::Vec3) -> ShadowChange {
+        if self.recent_moves.front().is_none_or(|m| m.epoch > epoch + 1) && epoch < self.last_move_epoch {
+            return ShadowChange::Unknown;
         }
-        self.recent_moves.iter().filter(|&&(e, _)| e > epoch).any(|&(_, (lo, hi))| {
-            self.lights.iter().any(|l| l.may_shadow(p, (lo, hi)))
-        })
+        let since = || self.recent_moves.iter().filter(|m| m.epoch > epoch);
+        let mut worst = ShadowChange::Unchanged;
+        for (k, m) in since().enumerate() {
+            // Each object once, at its first move since `epoch`: its place then was `from`.
+            if since().take(k).any(|e| e.object == m.object) {
+                continue;
+            }
+            let bvh = self.move_shadows.get(m.object);
+            let now = &self.transforms[m.object as usize];
+            for l in &self.lights {
+                let swept = || since().filter(|e| e.object == m.object).any(|e| l.may_shadow(p, e.region));
+                match bvh {
+                    Some(bvh) if l.radius == 0.0 => {
+                        let (then, now) = (segment_blocked(bvh, &m.from.inverse(), p, l.center), segment_blocked(bvh, &now.inverse(), p, l.center));
+                        if then != now {
+                            return ShadowChange::Changed;
+                        }
+                    }
+                    _ if swept() => worst = ShadowChange::Unknown,
+                    _ => {}
+                }
+            }
+        }
+        worst
     }
 
     /// Builds ray batches for the picked pixels and submits them; returns requests sent.
@@ -821,8 +866,19 @@ fn normal_matrix(t: &glam::Affine3A) -> glam::Mat3A {
     t.matrix3.inverse().transpose()
 }
 
-/// Moves whose swept boxes are remembered for samples that arrive after them.
+/// Moves remembered for samples that arrive after them.
 const RECENT_MOVES: usize = 64;
+
+/// One object move as samples shaded before it need it.
+#[derive(Debug, Clone, Copy)]
+struct RecentMove {
+    epoch: u64,
+    object: u32,
+    /// The object's transform before the move.
+    from: glam::Affine3A,
+    /// The world box it swept (old and new place).
+    region: (glam::Vec3, glam::Vec3),
+}
 
 /// A light as the shadow tests see it: every emitting point within a sphere.
 fn light_bound(l: &edgepoint_scene::Light) -> LightBound {

@@ -15,6 +15,7 @@ mod edge_source;
 mod feedback;
 mod frame_loop;
 mod mesh_shadows;
+pub mod move_shadows;
 pub mod memory;
 mod output;
 mod progress;
@@ -122,7 +123,7 @@ impl Session {
             fl.run();
             let c = fl.counters;
             tracing::info!(session = %id, frames = c.frames, samples_inserted = c.samples_inserted, averaged = c.averaged,
-                samples_requested = c.samples_requested, carried = c.carried, stale_dropped = c.stale_dropped,
+                samples_requested = c.samples_requested, carried = c.carried, stale_dropped = c.stale_dropped, shadow_changed = c.shadow_changed,
                 unmatched = c.unmatched, parts_forgotten = c.parts_forgotten, nonfinite = c.nonfinite, refused_batches = c.refused_batches,
                 triples = fl.feedback.triples.len(), "session ended");
             drop(fl);

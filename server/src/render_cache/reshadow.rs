@@ -1,0 +1,124 @@
+//! What an object's move does to the cached points it can shadow (DESIGN.md "Motion", step
+//! 1 of a frame), decided exactly where it can be.
+//!
+//! A point whose segment toward a light crosses the moved object's old or new box *may* be
+//! shadowed differently now. For an area light that is all the cache can say: the point is
+//! marked stale (re-shaded first, shown meanwhile). For a point light it can say more: the
+//! point's shadow from the moved object changed exactly when the segment from the point to
+//! the light meets the object in one place and not in the other — a question about the
+//! object's triangles that the session answers ([`ShadowQuery`]). Where it did not change,
+//! the point's shading is as right as before the move and it stays fresh; where it did, the
+//! point is wrong (an old shadow's dark point on a surface now lit, or a lit point now in
+//! shadow) and is dropped: its pixel goes back to the sampler at the highest priority, and
+//! the frame interpolates its region from the points around it, which are right.
+//!
+//! Before, every point in the swept box's shadow volume turned stale on every move, right or
+//! wrong, and stayed in the frame until re-shaded: while an object keeps moving, that is its
+//! whole shadow and its surroundings, more than the sampler re-shades in ten frames, and the
+//! wrong ones among them drew the old shadow's ragged outline beside the new shadow edge.
+use super::{LightBound, RenderCache, FLAG_HIT, FLAG_STALE, FLAG_VALID};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// What a move did to one point's shading from one light.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShadowChange {
+    /// Its shadow from the moved object is the same: its shading stays right.
+    Unchanged,
+    /// May have changed, cannot say (an area light, or no exact test for the object).
+    Unknown,
+    /// Changed: the point now shows a shadow that is not there, or misses one that is.
+    Changed,
+}
+
+/// The exact question a move asks about a point: `change(p, light)` for the point `p` and
+/// the light of index `light`, asked only where the segment from `p` to that light's centre
+/// meets the moved object's swept box (grown by the light's radius).
+pub trait ShadowQuery: Sync {
+    fn change(&self, p: Vec3, light: usize) -> ShadowChange;
+}
+
+/// Points a move affected (see [`RenderCache::reshadow`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Reshadowed {
+    /// Marked stale: their shading may have changed.
+    pub stale: u32,
+    /// Dropped: their shading is wrong now.
+    pub dropped: u32,
+}
+
+/// A point's verdict: the worst over the lights whose segment meets `boxes`.
+#[inline]
+pub fn verdict(p: Vec3, boxes: &[(Vec3, Vec3, Vec3)], query: &dyn ShadowQuery) -> ShadowChange {
+    let mut worst = ShadowChange::Unchanged;
+    for (l, &(c, lo, hi)) in boxes.iter().enumerate() {
+        if !super::segment_hits_box(p, c, lo, hi) {
+            continue;
+        }
+        match query.change(p, l) {
+            ShadowChange::Changed => return ShadowChange::Changed,
+            ShadowChange::Unknown => worst = ShadowChange::Unknown,
+            ShadowChange::Unchanged => {}
+        }
+    }
+    worst
+}
+
+/// Per light: its centre and `region` grown by its radius (what [`verdict`] tests first).
+pub fn light_boxes(region: (Vec3, Vec3), lights: &[LightBound]) -> Vec<(Vec3, Vec3, Vec3)> {
+    lights.iter().map(|l| {
+        let (lo, hi) = l.grow(region);
+        (l.center, lo, hi)
+    }).collect()
+}
+
+impl RenderCache {
+    /// After an object moved through the world box `region` (its old and new place): every
+    /// hit point not already stale whose segment toward a light meets the box is asked
+    /// `query` ([`verdict`]). Changed: dropped (its slot freed). Unknown: marked stale, as
+    /// [`RenderCache::age_shadowed_by`] marks every such point. Unchanged: left as it is.
+    /// Points already stale stay stale (shaded at some earlier state, they cannot be
+    /// judged against the last one). Call after [`RenderCache::move_object`], which marks
+    /// the moved object's own points stale.
+    pub fn reshadow(&mut self, region: (Vec3, Vec3), lights: &[LightBound], query: &dyn ShadowQuery) -> Reshadowed {
+        if lights.is_empty() || !(region.0.cmple(region.1).all()) {
+            return Reshadowed::default();
+        }
+        self.point_image_from = None;
+        let boxes = light_boxes(region, lights);
+        let p = &mut self.pool;
+        const CHUNK: usize = 4096;
+        // Decided in parallel (the flags of stale points set there); the drops are applied
+        // after, since they touch the regions' free lists.
+        let (dropped, stale) = p
+            .flags
+            .par_chunks_mut(CHUNK)
+            .zip(p.px.par_chunks(CHUNK).zip(p.py.par_chunks(CHUNK)).zip(p.pz.par_chunks(CHUNK)))
+            .enumerate()
+            .map(|(c, (flags, ((xs, ys), zs)))| {
+                let (mut out, mut stale) = (Vec::new(), 0u32);
+                for k in 0..flags.len() {
+                    if flags[k] & (FLAG_VALID | FLAG_HIT | FLAG_STALE) != FLAG_VALID | FLAG_HIT {
+                        continue;
+                    }
+                    match verdict(Vec3::new(xs[k], ys[k], zs[k]), &boxes, query) {
+                        ShadowChange::Unchanged => {}
+                        ShadowChange::Unknown => {
+                            flags[k] |= FLAG_STALE;
+                            stale += 1;
+                        }
+                        ShadowChange::Changed => out.push((c * CHUNK + k) as u32),
+                    }
+                }
+                (out, stale)
+            })
+            .reduce(|| (Vec::new(), 0), |mut a, b| {
+                a.0.extend(b.0);
+                (a.0, a.1 + b.1)
+            });
+        if !dropped.is_empty() {
+            self.drop_points(&dropped);
+        }
+        Reshadowed { stale, dropped: dropped.len() as u32 }
+    }
+}
