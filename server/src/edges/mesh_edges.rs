@@ -69,6 +69,9 @@ pub fn lighting_at(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, q: DVec2,
 /// size each): far above the arrangement's snapping, far below any feature the EPI draws.
 pub const SIDE_OFFSET_TOLERANCES: f64 = 1000.0;
 
+/// A shadow edge with its penumbra at its ends (world vectors across it).
+pub type EdgeWithPenumbra = (EdgeSegment, [Vec3; 2]);
+
 /// How many mesh edges went which way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct MeshEdgeCounts {
@@ -119,7 +122,7 @@ pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<(
     for (l, light) in mesh.lights.iter().enumerate() {
         let dc = diameter_and_centre(light);
         let receivers: Vec<&ReceiverMesh> = mesh.meshes[l].iter().flatten().map(|m| &**m).collect();
-        let parts: Vec<(MeshEdgeCounts, Vec<(EdgeSegment, [Vec3; 2])>)> = receivers
+        let parts: Vec<(MeshEdgeCounts, Vec<EdgeWithPenumbra>)> = receivers
             .par_iter()
             .map(|m| {
                 let (mut c, mut v) = (MeshEdgeCounts::default(), Vec::new());
@@ -207,7 +210,8 @@ pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, mid: DVec2, dir
     let r = &m.receiver;
     let Some(nu) = dir.perp().try_normalize() else { return true };
     let delta = width / 16.0;
-    if !(delta > 100.0 * r.tol) {
+    // (NaN widths too.)
+    if delta.is_nan() || delta <= 100.0 * r.tol {
         return true;
     }
     let q = |k: f64| mid + nu * (k * delta);

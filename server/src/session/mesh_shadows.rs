@@ -54,17 +54,17 @@ impl MeshShadows {
     pub fn sync(&mut self, transforms: &[Affine3A]) -> bool {
         let t = Instant::now();
         let mut moved = 0;
-        for o in 0..self.transforms.len().min(transforms.len()) {
-            if self.transforms[o] == transforms[o] {
+        for (o, to) in transforms.iter().enumerate().take(self.transforms.len()) {
+            if self.transforms[o] == *to {
                 continue;
             }
             // The change of place in f64 (as the cache carries its points, `move_object`).
-            let d = daffine(&transforms[o]) * daffine(&self.transforms[o]).inverse();
+            let d = daffine(to) * daffine(&self.transforms[o]).inverse();
             let new = self.geometry.moved(o as u32, |p| d.transform_point3(p));
             let stats = self.mesh.move_object(&self.geometry, &new, &mut self.grid, o as u32);
             tracing::debug!(object = o, ?stats, "discontinuity mesh updated");
             self.geometry = new;
-            self.transforms[o] = transforms[o];
+            self.transforms[o] = *to;
             moved += 1;
         }
         if moved > 0 {
