@@ -139,7 +139,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
             "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
             "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "traces_reintersected": stats.traces_reintersected,
             "traces_untouched": stats.traces_untouched,
-            "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_occluded_further": stats.faces_occluded_further, "faces_recomputed": stats.faces_recomputed,
+            "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
             // CPU time of the update's parts, summed over threads.
             "cpu_ms": {
                 "own_receivers": stats.own_receivers_ns as f64 / 1e6, "scan": stats.scan_ns as f64 / 1e6,

@@ -135,16 +135,6 @@ impl<'a> Visible<'a> {
         (self.p, &self.base)
     }
 
-    /// Starts from a visible part found before at the same point (its pieces in 3D, as
-    /// [`Visible::pieces`] gave them) instead of the whole light. The visible part is the
-    /// light less the union of the blockers' shadows, in whatever order they come, so
-    /// occluding this with more blockers gives the part visible with the earlier ones and
-    /// these together (up to the rounding of the pieces and of slivers dropped).
-    pub fn with_pieces(mut self, pieces: &[Vec<DVec3>]) -> Visible<'a> {
-        self.pieces = pieces.iter().map(|q| q.iter().map(|x| self.light.local(*x)).collect()).collect();
-        self
-    }
-
     /// Whether anything of the light is left.
     pub fn is_empty(&self) -> bool {
         self.pieces.is_empty()

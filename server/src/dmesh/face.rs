@@ -27,32 +27,28 @@ pub struct FaceBackprojection {
 /// which of them hid something.
 pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blockers: &[u32], q: DVec2, hit: &mut Vec<u32>) -> Option<Visible<'a>> {
     hit.clear();
-    let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
-    occlude_with(g, &mut vis, blockers, hit);
-    Some(vis)
-}
-
-/// Occludes `vis` with `blockers`, appending to `hit` those that hid something.
-fn occlude_with(g: &Geometry, vis: &mut Visible, blockers: &[u32], hit: &mut Vec<u32>) {
+    let p = r.to3(q).as_vec3();
+    let mut vis = Visible::new(light, p, r.n.as_vec3())?;
     // Only triangles meeting the pyramid from the point to the light can hide any of it: a
     // box test first spares the clipping of the others (the shaft holds far more).
     let (apex, base) = vis.pyramid();
     let (lo, hi) = base.iter().fold((apex, apex), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
     for &t in blockers {
-        if vis.is_empty() {
-            break;
-        }
         let tri = g.tri(t);
         if tri.iter().all(|x| x.x < lo.x) || tri.iter().all(|x| x.x > hi.x) || tri.iter().all(|x| x.y < lo.y) || tri.iter().all(|x| x.y > hi.y) || tri.iter().all(|x| x.z < lo.z) || tri.iter().all(|x| x.z > hi.z) {
             continue;
         }
-        if solid::faces_away(g, t, tri, apex) {
+        if solid::faces_away(g, t, tri, p.as_dvec3()) {
             continue;
         }
         if vis.occlude(tri) {
             hit.push(t);
         }
+        if vis.is_empty() {
+            break;
+        }
     }
+    Some(vis)
 }
 
 impl FaceBackprojection {
@@ -62,17 +58,6 @@ impl FaceBackprojection {
             Some(vis) => FaceBackprojection { point, pieces: vis.pieces(), occluders, irradiance: vis.irradiance() },
             None => FaceBackprojection { point, ..Default::default() },
         }
-    }
-
-    /// This backprojection with `more` blockers besides those it was computed with (an
-    /// object moved into the view of the face's point, which hid nothing from there before):
-    /// the old visible part less what they hide, `more`'s hits added to the occluders.
-    pub fn occluded_further(&self, g: &Geometry, light: &LightPlane, r: &Receiver, more: &[u32]) -> FaceBackprojection {
-        let Some(vis) = Visible::new(light, r.to3(self.point).as_vec3(), r.n.as_vec3()) else { return self.clone() };
-        let mut vis = vis.with_pieces(&self.pieces);
-        let mut occluders = self.occluders.clone();
-        occlude_with(g, &mut vis, more, &mut occluders);
-        FaceBackprojection { point: self.point, pieces: vis.pieces(), occluders, irradiance: vis.irradiance() }
     }
 
     pub fn bytes(&self) -> usize {
