@@ -167,6 +167,13 @@ impl<'a> Visible<'a> {
     /// or its shadow has no area (seen edge on).
     fn project(&self, t: &[DVec3; 3]) -> Option<Vec<DVec2>> {
         let p = self.p;
+        // A triangle wholly outside one side of the pyramid, or wholly beyond either end,
+        // would be clipped away below: it is passed over without the clipping (most
+        // triangles that reach here only met the pyramid's box).
+        let (light, h) = (self.light, self.h);
+        if self.sides.iter().any(|m| t.iter().all(|x| m.dot(*x - p) < 0.0)) || t.iter().all(|x| light.height(*x) - LIGHT_GAP * h < 0.0) || t.iter().all(|x| (1.0 - 1e-9) * h - light.height(*x) < 0.0) {
+            return None;
+        }
         let mut poly = t.to_vec();
         for m in &self.sides {
             poly = clip(&poly, |x| m.dot(x - p));
@@ -177,7 +184,6 @@ impl<'a> Visible<'a> {
         // Between (just short of) the light's plane and (just short of) the point: s =
         // 1 − height/h is the fraction of the way from p to the light, and the projection
         // divides by it.
-        let (light, h) = (self.light, self.h);
         poly = clip(&poly, |x| light.height(x) - LIGHT_GAP * h);
         poly = clip(&poly, |x| (1.0 - 1e-9) * h - light.height(x));
         if poly.is_empty() {

@@ -96,6 +96,27 @@ fn one_side(p: DVec3, m: DVec3, others: impl Iterator<Item = DVec3>, tol: f64) -
 /// The VE trace of light corner `v` and blocker edge `(ia, ib)`, or `None` when the edge is
 /// no silhouette from `v` or its shadow misses the receiver.
 pub fn ve_trace(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, v: DVec3, edge: EdgeKey) -> Option<Trace> {
+    let (pa, pb) = ve_ends(g, light, r, v, edge)?;
+    // The silhouette test last: most edges' shadows miss a given receiver.
+    if !is_silhouette(g, v, edge, r.tol) {
+        return None;
+    }
+    Some(ve_trace_unchecked(li, v, edge, pa, pb))
+}
+
+/// Whether blocker edge `edge` is a silhouette seen from `v`: its triangles lie on one side
+/// of the plane through `v` and the edge.
+pub fn is_silhouette(g: &Geometry, v: DVec3, edge: EdgeKey, tol: f64) -> bool {
+    let (a, b) = (g.pos[edge.0 as usize], g.pos[edge.1 as usize]);
+    let m = (a - v).cross(b - v);
+    let Some(tris) = g.edge_tris.get(&edge) else { return false };
+    let third = tris.iter().flat_map(|t| g.tris[*t as usize]).filter(|x| *x != edge.0 && *x != edge.1).map(|x| g.pos[x as usize]);
+    one_side(v, m, third, tol)
+}
+
+/// The ends on the receiver of the shadow of `edge` from light corner `v`, or `None` when it
+/// misses the receiver.
+fn ve_ends(g: &Geometry, light: &LightPlane, r: &Receiver, v: DVec3, edge: EdgeKey) -> Option<(DVec2, DVec2)> {
     let (a, b) = (g.pos[edge.0 as usize], g.pos[edge.1 as usize]);
     let hv = r.height(v);
     let (ha, hb) = (r.height(a), r.height(b));
@@ -113,14 +134,12 @@ pub fn ve_trace(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, v: DVec
     if pa.distance(pb) <= r.tol {
         return None;
     }
-    // The silhouette test last: most edges' shadows miss a given receiver.
-    let m = (a - v).cross(b - v);
-    let tris = g.edge_tris.get(&edge)?;
-    let third = tris.iter().flat_map(|t| g.tris[*t as usize]).filter(|x| *x != edge.0 && *x != edge.1).map(|x| g.pos[x as usize]);
-    if !one_side(v, m, third, r.tol) {
-        return None;
-    }
-    Some(Trace { generator: Generator::Ve { light_vertex: li, edge }, a: pa, b: pb, apex: v, light_side: None })
+    Some((pa, pb))
+}
+
+/// The VE trace with ends `pa pb`, its edge known to be a silhouette from `v`.
+fn ve_trace_unchecked(li: u32, v: DVec3, edge: EdgeKey, pa: DVec2, pb: DVec2) -> Trace {
+    Trace { generator: Generator::Ve { light_vertex: li, edge }, a: pa, b: pb, apex: v, light_side: None }
 }
 
 /// Whether blocker vertex `w` lies on its object's outline seen from `y`: one of its edges
@@ -220,9 +239,42 @@ pub fn ev_traces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, (y0, y
     }
 }
 
+/// The edges of some triangles (a moved object's) that are silhouettes seen from each corner
+/// of a light ([`is_silhouette`], which depends on the corner and the edge only, not on the
+/// receiver): found once for a move and a light instead of once per receiver, they spare
+/// the receivers the test of every edge whose shadow reaches them.
+#[derive(Debug, Clone)]
+pub struct Silhouettes {
+    /// Per light corner, sorted.
+    per_corner: Vec<Vec<EdgeKey>>,
+}
+
+impl Silhouettes {
+    pub fn new(g: &Geometry, light: &LightPlane, tris: std::ops::Range<u32>, tol: f64) -> Silhouettes {
+        let mut edges: Vec<EdgeKey> = tris.flat_map(|t| {
+            let v = g.tris[t as usize];
+            [edge_key(v[0], v[1]), edge_key(v[1], v[2]), edge_key(v[2], v[0])]
+        }).collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let per_corner = light.corners.iter().map(|q| {
+            let v = light.lift(*q);
+            edges.iter().copied().filter(|e| is_silhouette(g, v, *e, tol)).collect()
+        }).collect();
+        Silhouettes { per_corner }
+    }
+}
+
 /// Every trace on the receiver: VE for each light corner above it and each edge of the
 /// blockers, EV for each light edge above it and each blocker vertex.
 pub fn traces(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver, blockers: &[u32], out: &mut Vec<Trace>) {
+    traces_with(g, light, above, r, blockers, None, out);
+}
+
+/// [`traces`], with the blockers' silhouette edges from each light corner given when they
+/// are known (`silhouettes`, made from triangles that include `blockers`, with the
+/// receiver's tolerance): only those are traced for VE.
+pub fn traces_with(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver, blockers: &[u32], silhouettes: Option<&Silhouettes>, out: &mut Vec<Trace>) {
     out.clear();
     let mut edges: Vec<EdgeKey> = Vec::with_capacity(blockers.len() * 3);
     let mut verts: Vec<u32> = Vec::with_capacity(blockers.len() * 3);
@@ -239,7 +291,16 @@ pub fn traces(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver
     verts.dedup();
     for (li, v) in above.vertices.iter().enumerate() {
         let Some(v) = *v else { continue };
-        out.extend(edges.iter().filter_map(|e| ve_trace(g, light, r, li as u32, v, *e)));
+        match silhouettes {
+            Some(s) => {
+                let sil = &s.per_corner[li];
+                out.extend(edges.iter().filter(|e| sil.binary_search(e).is_ok()).filter_map(|e| {
+                    let (pa, pb) = ve_ends(g, light, r, v, *e)?;
+                    Some(ve_trace_unchecked(li as u32, v, *e, pa, pb))
+                }));
+            }
+            None => out.extend(edges.iter().filter_map(|e| ve_trace(g, light, r, li as u32, v, *e))),
+        }
     }
     let mut parts = Vec::new();
     for (li, e) in above.edges.iter().enumerate() {
@@ -359,15 +420,84 @@ pub fn hide_in_box(g: &Geometry, r: &Receiver, trace: &Trace, (lo, hi): (DVec3, 
     }
 }
 
+/// A list of triangles in runs of [`RUN`] consecutive entries, each run with its box: a
+/// surface's fan box is tested against a run's box before the run's triangles are. Meshes
+/// list their triangles strip by strip, so a run of a sorted blocker list is mostly a small
+/// patch of one object, and most runs miss a thin fan.
+#[derive(Debug, Clone)]
+pub struct Runs<'a> {
+    tris: &'a [u32],
+    boxes: Vec<(DVec3, DVec3)>,
+}
+
+pub const RUN: usize = 16;
+
+impl<'a> Runs<'a> {
+    pub fn new(g: &Geometry, tris: &'a [u32]) -> Runs<'a> {
+        let boxes = tris
+            .chunks(RUN)
+            .map(|c| {
+                c.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| {
+                    let p = g.tri(*t);
+                    (lo.min(p[0]).min(p[1]).min(p[2]), hi.max(p[0]).max(p[1]).max(p[2]))
+                })
+            })
+            .collect();
+        Runs { tris, boxes }
+    }
+
+    /// Calls `f` on every triangle, in list order, of the runs that may hold a triangle
+    /// hiding part of `trace` (fan box `fan`, see [`hide_in_box`]): the run's box meets the
+    /// fan box grown by the tolerance and does not lie on one side of the plane of each of
+    /// the fan's regions (a triangle on one side of a region's plane, touching it at most,
+    /// hides nothing there).
+    pub fn each_near(&self, r: &Receiver, trace: &Trace, (lo, hi): (DVec3, DVec3), mut f: impl FnMut(u32)) {
+        let planes = fan_planes(r, trace);
+        let c = trace.apex;
+        for (run, b) in self.tris.chunks(RUN).zip(&self.boxes) {
+            if b.0.cmpgt(hi + r.tol).any() || b.1.cmplt(lo - r.tol).any() {
+                continue;
+            }
+            // The box's extreme heights over each plane; half the tolerance to spare for the
+            // rounding of the corners' heights against those of the triangles inside.
+            let (mid, ext) = ((b.0 + b.1) * 0.5, (b.1 - b.0) * 0.5);
+            let aside = |m: &Option<DVec3>| {
+                m.is_none_or(|m| {
+                    let (d, e) = (m.dot(mid - c), m.abs().dot(ext));
+                    d - e > -0.5 * r.tol || d + e < 0.5 * r.tol
+                })
+            };
+            if planes.iter().all(aside) {
+                continue;
+            }
+            run.iter().for_each(|t| f(*t));
+        }
+    }
+}
+
+/// The unit normals of the planes of a trace's fan regions, as [`hidden_in_fan`] computes
+/// them from the regions [`hide_in_box`] passes (`None` for a degenerate region, which hides
+/// nothing).
+fn fan_planes(r: &Receiver, trace: &Trace) -> [Option<DVec3>; 2] {
+    let (p0, p1) = (r.to3(trace.a), r.to3(trace.b));
+    let c = trace.apex;
+    match trace.light_side {
+        None => {
+            let a = c + (p0 - c) * LIGHT_GAP;
+            [(p0 - a).cross(p1 - a).try_normalize(), None]
+        }
+        Some((y0, y1)) => [(p0 - c).cross(p1 - c).try_normalize(), (y0 - c).cross(y1 - c).try_normalize()],
+    }
+}
+
 impl TraceVis {
-    /// The trace with every blocker intersected.
-    pub fn new(g: &Geometry, r: &Receiver, trace: Trace, blockers: &[u32]) -> TraceVis {
+    /// The trace with every blocker intersected (`blockers` in runs with their boxes: a
+    /// triangle missing the fan box hides nothing of it, see [`hide_in_box`]).
+    pub fn new(g: &Geometry, r: &Receiver, trace: Trace, blockers: &Runs) -> TraceVis {
         let mut hidden = Vec::new();
         let fan = fan_box(r, &trace);
-        for &t in blockers {
-            hide_in_box(g, r, &trace, fan, t, &mut hidden);
-        }
-        hidden.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)));
+        blockers.each_near(r, &trace, fan, |t| hide_in_box(g, r, &trace, fan, t, &mut hidden));
+        sort_hidden(&mut hidden);
         TraceVis { trace, hidden }
     }
 
@@ -405,9 +535,16 @@ impl TraceVis {
 pub fn receiver_traces(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Receiver, blockers: &[u32]) -> Vec<TraceVis> {
     let mut tr = Vec::new();
     traces(g, light, above, r, blockers, &mut tr);
-    let mut out: Vec<TraceVis> = tr.into_iter().map(|t| TraceVis::new(g, r, t, blockers)).collect();
+    let runs = Runs::new(g, blockers);
+    let mut out: Vec<TraceVis> = tr.into_iter().map(|t| TraceVis::new(g, r, t, &runs)).collect();
     canonical_order(&mut out);
     out
+}
+
+/// An intersection list in the order 1D visibility walks it: by start, then end (then
+/// triangle, so that the order does not depend on the order the triangles were tested in).
+pub fn sort_hidden(hidden: &mut [(u32, f64, f64)]) {
+    hidden.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
 }
 
 /// Traces in one order whatever found them (by generator, then by where they start), so an

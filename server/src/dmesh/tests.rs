@@ -608,3 +608,98 @@ fn receivers_in_umbra_behind_one_occluder_receive_nothing() {
     }
     assert!(culled > 50 && checked > 100, "{culled} receivers in umbra, {checked} points");
 }
+
+/// Receiver meshes of `lights` on the receivers `only` marks (every one for `None`).
+fn receiver_meshes(g: &Geometry, lights: &[LightPlane], only: Option<&[bool]>) -> Vec<(usize, ReceiverMesh)> {
+    let grid = Grid::build(g, GRID_TRIANGLES_PER_VOXEL);
+    let tol = tolerance(g);
+    let mut s = Scratch::default();
+    let mut out = Vec::new();
+    for (l, light) in lights.iter().enumerate() {
+        for t in (0..g.tris.len() as u32).filter(|t| only.is_none_or(|o| o[*t as usize])) {
+            if let Some(m) = ReceiverMesh::compute(g, &grid, light, t, tol, &mut s) {
+                out.push((l, m));
+            }
+        }
+    }
+    out
+}
+
+/// A scene, its lights, the receivers to mesh (every one for `None`) and an object.
+type SceneCase = (Geometry, Vec<LightPlane>, Option<Vec<bool>>, u32);
+
+/// Random scenes and `cornell` with their last object, and the receivers of `rooms` about
+/// `ball4` (a 960-triangle solid, whose runs of 16 triangles are small patches) with it.
+fn scenes_with_runs(r: &mut Rng) -> Vec<SceneCase> {
+    let mut scenes: Vec<SceneCase> = random_scenes_and_cornell(r, 6)
+        .into_iter()
+        .map(|(g, l)| {
+            let o = g.tri_start.len() as u32 - 1;
+            (g, l, None, o)
+        })
+        .collect();
+    let rooms = edgepoint_scene::builtin::load("rooms").unwrap();
+    let g = Geometry::from_scene(&rooms);
+    let o = rooms.object_id("ball4").unwrap();
+    // The receivers about the ball but not its own triangles (nothing of it is above them).
+    let mut only = receivers_near(&g, o, 1.0, 400);
+    g.object_tris(o).for_each(|t| only[t as usize] = false);
+    scenes.push((g, area_lights(&rooms), Some(only), o));
+    scenes
+}
+
+/// The intersection lists a receiver keeps (blockers tested run by run, runs whose box misses
+/// the fan's box or lies on one side of a fan plane passed over) equal those of every
+/// blocker tested one by one.
+#[test]
+fn intersection_lists_with_runs_passed_over_equal_every_blocker_tested() {
+    let mut r = Rng::new(23);
+    let (mut traces, mut tested, mut all, mut hidden) = (0, 0, 0, 0);
+    for (g, lights, only, _) in scenes_with_runs(&mut r) {
+        for (_, m) in receiver_meshes(&g, &lights, only.as_deref()) {
+            let runs = segments::Runs::new(&g, &m.blockers);
+            for tv in &m.traces {
+                let fan = segments::fan_box(&m.receiver, &tv.trace);
+                let mut want = Vec::new();
+                for &t in &m.blockers {
+                    segments::hide_in_box(&g, &m.receiver, &tv.trace, fan, t, &mut want);
+                }
+                segments::sort_hidden(&mut want);
+                assert_eq!(tv.hidden, want, "receiver {} trace {:?}", m.receiver.tri, tv.trace.generator);
+                runs.each_near(&m.receiver, &tv.trace, fan, |_| tested += 1);
+                all += m.blockers.len();
+                hidden += want.len();
+                traces += 1;
+            }
+        }
+    }
+    eprintln!("{traces} traces, {hidden} hidden intervals; {tested} of {all} blocker tests made");
+    assert!(traces > 500 && hidden > 50 && tested < all, "{traces} traces, {hidden} hidden, {tested} of {all} tested");
+}
+
+/// The VE traces of an object's triangles from its silhouette edges found once per light
+/// ([`segments::Silhouettes`]) equal those of every edge tested on each receiver.
+#[test]
+fn traces_from_silhouettes_found_once_equal_every_edge_tested() {
+    let mut r = Rng::new(31);
+    let (mut receivers, mut traces) = (0, 0);
+    for (g, lights, only, o) in scenes_with_runs(&mut r) {
+        let tol = tolerance(&g);
+        let tris = g.object_tris(o);
+        for (l, m) in receiver_meshes(&g, &lights, only.as_deref()) {
+            let light = &lights[l];
+            let sil = segments::Silhouettes::new(&g, light, tris.clone(), tol);
+            let (receiver, above, _) = frame(&g, light, m.receiver.tri, tol).unwrap();
+            let of_object: Vec<u32> = m.blockers.iter().copied().filter(|t| tris.contains(t)).collect();
+            let (mut want, mut got) = (Vec::new(), Vec::new());
+            segments::traces(&g, light, &above, &receiver, &of_object, &mut want);
+            segments::traces_with(&g, light, &above, &receiver, &of_object, Some(&sil), &mut got);
+            let key = |t: &segments::Trace| (t.generator, t.a.x.to_bits(), t.a.y.to_bits(), t.b.x.to_bits(), t.b.y.to_bits());
+            assert_eq!(want.iter().map(key).collect::<Vec<_>>(), got.iter().map(key).collect::<Vec<_>>(), "receiver {}", m.receiver.tri);
+            receivers += !of_object.is_empty() as usize;
+            traces += want.len();
+        }
+    }
+    eprintln!("{receivers} receivers with blockers of the object, {traces} traces");
+    assert!(receivers > 20 && traces > 1000, "{receivers} receivers, {traces} traces");
+}
