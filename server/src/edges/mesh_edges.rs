@@ -90,7 +90,7 @@ pub fn sides(r: &Receiver, q0: DVec2, q1: DVec2) -> Option<[DVec2; 2]> {
     let nu = (q1 - q0).perp().try_normalize()?;
     let (mid, eps) = (0.5 * (q0 + q1), SIDE_OFFSET_TOLERANCES * r.tol);
     let s = [mid + nu * eps, mid - nu * eps];
-    s.iter().all(|q| inside(&r.corners, *q)).then_some(s)
+    s.iter().all(|q| r.contains(*q)).then_some(s)
 }
 
 /// The light's largest corner-to-corner distance and its centre.
@@ -108,16 +108,11 @@ fn blocker_segment(g: &Geometry, gen: &Generator) -> (DVec3, DVec3) {
     }
 }
 
-/// Whether `q` lies inside the receiver triangle (corners counter-clockwise).
-fn inside(corners: &[DVec2; 3], q: DVec2) -> bool {
-    (0..3).all(|i| (corners[(i + 1) % 3] - corners[i]).perp_dot(q - corners[i]) >= 0.0)
-}
-
 /// Appends the mesh's shadow edges for the EPI to `out`, each with its penumbra at its ends
 /// (world vectors across it; zero for a hard edge), in the order lights × receivers × mesh
 /// edges.
 /// Receivers in parallel (on the caller's pool), the result in that order whatever the split.
-pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<(EdgeSegment, [Vec3; 2])>) -> MeshEdgeCounts {
+pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<EdgeWithPenumbra>) -> MeshEdgeCounts {
     let mut counts = MeshEdgeCounts::default();
     for (l, light) in mesh.lights.iter().enumerate() {
         let dc = diameter_and_centre(light);
@@ -152,7 +147,7 @@ impl std::ops::Add for MeshEdgeCounts {
 }
 
 /// [`mesh_shadow_edges`] of one receiver mesh.
-fn receiver_edges(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, (diameter, centre): (f64, DVec3), counts: &mut MeshEdgeCounts, out: &mut Vec<(EdgeSegment, [Vec3; 2])>) {
+fn receiver_edges(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, (diameter, centre): (f64, DVec3), counts: &mut MeshEdgeCounts, out: &mut Vec<EdgeWithPenumbra>) {
     if m.umbra || m.segments.is_empty() {
         return;
     }
@@ -215,7 +210,7 @@ pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, mid: DVec2, dir
         return true;
     }
     let q = |k: f64| mid + nu * (k * delta);
-    if ![-2.0, 2.0].iter().all(|&k| inside(&r.corners, q(k))) {
+    if ![-2.0, 2.0].iter().all(|&k| r.contains(q(k))) {
         return true;
     }
     let e = |k: f64| m.irradiance(g, light, q(k));

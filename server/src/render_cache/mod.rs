@@ -25,7 +25,6 @@ mod interpolate;
 mod reproject;
 
 use glam::Vec3;
-use rayon::prelude::*;
 use std::collections::VecDeque;
 
 /// Name of the stage (in [`crate::stage_times::StageTimes`]) that projects the points, keeps
@@ -662,37 +661,10 @@ impl RenderCache {
     /// box. Conservative: the segment from the point to the light's centre is tested against
     /// the box grown by the light's radius, which contains every ray from the point to the
     /// light's emitting surface where it crosses the box. Their shading stays visible until
-    /// re-shaded; prioritized sampling re-shades stale points first. Returns the points aged.
+    /// re-shaded; prioritized sampling re-shades stale points first. Returns the points aged
+    /// (those not stale already). A move asks more where it can ([`Self::reshadow`]).
     pub fn age_shadowed_by(&mut self, region: (Vec3, Vec3), lights: &[LightBound]) -> u32 {
-        if lights.is_empty() || !(region.0.cmple(region.1).all()) {
-            return 0;
-        }
-        // Points turning stale change what the point image shows of them.
-        self.point_image_from = None;
-        let p = &mut self.pool;
-        let boxes: Vec<(Vec3, Vec3, Vec3)> = lights.iter().map(|l| {
-            let (lo, hi) = l.grow(region);
-            (l.center, lo, hi)
-        }).collect();
-        const CHUNK: usize = 4096;
-        p.flags
-            .par_chunks_mut(CHUNK)
-            .zip(p.px.par_chunks(CHUNK).zip(p.py.par_chunks(CHUNK)).zip(p.pz.par_chunks(CHUNK)))
-            .map(|(flags, ((xs, ys), zs))| {
-                let mut n = 0u32;
-                for k in 0..flags.len() {
-                    if flags[k] & (FLAG_VALID | FLAG_HIT) != FLAG_VALID | FLAG_HIT {
-                        continue;
-                    }
-                    let q = Vec3::new(xs[k], ys[k], zs[k]);
-                    if boxes.iter().any(|&(c, lo, hi)| segment_hits_box(q, c, lo, hi)) {
-                        flags[k] |= FLAG_STALE;
-                        n += 1;
-                    }
-                }
-                n
-            })
-            .sum()
+        self.reshadow(region, lights, &reshadow::NoExactAnswer).stale
     }
 
     /// Gives every point maximal age ([`STALE_AGE`]): its shading may have changed (e.g. a

@@ -38,6 +38,16 @@ pub trait ShadowQuery: Sync {
     fn change(&self, p: Vec3, light: usize) -> ShadowChange;
 }
 
+/// The query with no exact answer anywhere: every point a move can shadow is marked stale
+/// ([`RenderCache::age_shadowed_by`]).
+pub struct NoExactAnswer;
+
+impl ShadowQuery for NoExactAnswer {
+    fn change(&self, _: Vec3, _: usize) -> ShadowChange {
+        ShadowChange::Unknown
+    }
+}
+
 /// Points a move affected (see [`RenderCache::reshadow`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Reshadowed {
@@ -75,8 +85,9 @@ pub fn light_boxes(region: (Vec3, Vec3), lights: &[LightBound]) -> Vec<(Vec3, Ve
 impl RenderCache {
     /// After an object moved through the world box `region` (its old and new place): every
     /// hit point not already stale whose segment toward a light meets the box is asked
-    /// `query` ([`verdict`]). Changed: dropped (its slot freed). Unknown: marked stale, as
-    /// [`RenderCache::age_shadowed_by`] marks every such point. Unchanged: left as it is.
+    /// `query` ([`verdict`]). Changed: dropped (its slot freed). Unknown: marked stale (with
+    /// [`NoExactAnswer`], every such point: [`RenderCache::age_shadowed_by`]). Unchanged: left
+    /// as it is.
     /// Points already stale stay stale (shaded at some earlier state, they cannot be
     /// judged against the last one). Call after [`RenderCache::move_object`], which marks
     /// the moved object's own points stale.

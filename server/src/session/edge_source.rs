@@ -260,6 +260,9 @@ impl ShadowThread {
         let mut errors = EdgeErrors::new();
         // The mesh, once a job asks for it; `Err(())` once a build found no area light.
         let mut mesh: Option<Result<MeshShadows, ()>> = None;
+        // Per scene light, whether it is an area light (the mesh's); a triple's index out of
+        // range is the finder's to refuse.
+        let area_light: Vec<bool> = scene.lights.iter().map(|l| matches!(l, edgepoint_scene::Light::Area { .. })).collect();
         let s = shared.clone();
         let thread = std::thread::Builder::new()
             .name("shadow-edges".into())
@@ -283,22 +286,27 @@ impl ShadowThread {
                     let earlier = m.result.take().map_or(0.0, |r| r.1);
                     m.result = Some((Arc::new(result), earlier + ms));
                 };
-                // With the mesh, the finder's area-light edges give way to the mesh's (when
-                // it is there for these transforms; else they show meanwhile).
-                let mesh_ready = job.mesh && matches!(&mesh, Some(Ok(m)) if m.at(&job.transforms));
+                // With the mesh built, its edges replace the finder's area-light ones (its
+                // older ones stay up while it is brought to a move), and the finder is given
+                // only the point lights' triples: its area-light edges would be thrown away.
+                // Before that, the finder's area-light edges show meanwhile.
+                let meshing = job.mesh && matches!(mesh, Some(Ok(_)));
+                let triples: Vec<TripleKey> = if meshing { job.triples.into_iter().filter(|k| !area_light.get(k.light as usize).copied().unwrap_or(false)).collect() } else { job.triples };
                 // The finder's edges last published, for the mesh's to join below.
                 let (mut finder_edges, mut finder_simplified) = (Vec::new(), 0);
                 let mut publish = |mut result: ShadowResult, ms: f64| {
-                    finder_edges.clone_from(&result.segments);
-                    finder_simplified = result.simplified;
-                    if let (true, Some(Ok(m))) = (mesh_ready, &mesh) {
+                    if job.mesh {
+                        finder_edges.clone_from(&result.segments);
+                        finder_simplified = result.simplified;
+                    }
+                    if let (true, Some(Ok(m))) = (meshing, &mesh) {
                         with_mesh_edges(&mut result.segments, &m.edges);
                     }
                     publish_now(result, ms);
                 };
                 let (stats, ms) = crate::background::pool().install(|| {
                     finder.set_transforms(&job.transforms);
-                    finder.update(job.triples)
+                    finder.update(triples)
                 });
                 let tolerance = job.simplify_tolerance;
                 if tolerance > 0.0 {
@@ -322,7 +330,7 @@ impl ShadowThread {
                     let segments = crate::background::pool().install(|| finder.with_penumbrae());
                     publish(ShadowResult { segments, stats, simplified: 0, tolerance }, ms);
                 }
-                if job.mesh && !mesh_ready && !matches!(mesh, Some(Err(()))) {
+                if job.mesh && !matches!(&mesh, Some(Err(()))) && !matches!(&mesh, Some(Ok(m)) if m.at(&job.transforms)) {
                     // Built or brought to the job's transforms, then published again.
                     let t = Instant::now();
                     crate::background::pool().install(|| match &mut mesh {

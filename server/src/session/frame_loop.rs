@@ -20,8 +20,8 @@ use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
-use super::move_shadows::{segment_blocked, MoveQuery, MoveShadows};
-use crate::render_cache::reshadow::ShadowChange;
+use super::move_shadows::{MoveQuery, MoveShadows};
+use crate::render_cache::reshadow::{ShadowChange, ShadowQuery};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
@@ -768,19 +768,17 @@ impl FrameLoop {
             if since().take(k).any(|e| e.object == m.object) {
                 continue;
             }
-            let bvh = self.move_shadows.get(m.object);
-            let now = &self.transforms[m.object as usize];
-            for l in &self.lights {
-                let swept = || since().filter(|e| e.object == m.object).any(|e| l.may_shadow(p, e.region));
-                match bvh {
-                    Some(bvh) if l.radius == 0.0 => {
-                        let (then, now) = (segment_blocked(bvh, &m.from.inverse(), p, l.center), segment_blocked(bvh, &now.inverse(), p, l.center));
-                        if then != now {
-                            return ShadowChange::Changed;
-                        }
-                    }
-                    _ if swept() => worst = ShadowChange::Unknown,
-                    _ => {}
+            let query = MoveQuery::new(self.move_shadows.get(m.object), &m.from, &self.transforms[m.object as usize], &self.lights);
+            for (l, light) in self.lights.iter().enumerate() {
+                // A segment that misses every box the object swept since then cannot have
+                // changed (both its places are in them): no exact test needed.
+                if !since().filter(|e| e.object == m.object).any(|e| light.may_shadow(p, e.region)) {
+                    continue;
+                }
+                match query.change(p, l) {
+                    ShadowChange::Changed => return ShadowChange::Changed,
+                    ShadowChange::Unknown => worst = ShadowChange::Unknown,
+                    ShadowChange::Unchanged => {}
                 }
             }
         }

@@ -6,11 +6,10 @@
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::grid::Grid;
 use crate::dmesh::{area_lights, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
-use crate::edges::mesh_edges::{mesh_shadow_edges, MeshEdgeCounts};
+use crate::edges::mesh_edges::{mesh_shadow_edges, EdgeWithPenumbra};
 use crate::edges::shadow::daffine;
-use crate::edges::EdgeSegment;
 use edgepoint_scene::Scene;
-use glam::{Affine3A, Vec3};
+use glam::Affine3A;
 use std::time::Instant;
 
 pub struct MeshShadows {
@@ -19,8 +18,7 @@ pub struct MeshShadows {
     mesh: DiscontinuityMesh,
     transforms: Vec<Affine3A>,
     /// The mesh's shadow edges with their penumbrae, for the objects at `transforms`.
-    pub edges: Vec<(EdgeSegment, [Vec3; 2])>,
-    pub counts: MeshEdgeCounts,
+    pub edges: Vec<EdgeWithPenumbra>,
 }
 
 impl MeshShadows {
@@ -35,7 +33,7 @@ impl MeshShadows {
         let geometry = Geometry::from_scene_at(scene, transforms);
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
-        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), edges: Vec::new(), counts: MeshEdgeCounts::default() };
+        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), edges: Vec::new() };
         m.refresh_edges();
         tracing::info!(
             lights = m.mesh.lights.len(),
@@ -81,6 +79,7 @@ impl MeshShadows {
 
     fn refresh_edges(&mut self) {
         self.edges.clear();
-        self.counts = mesh_shadow_edges(&self.mesh, &self.geometry, &mut self.edges);
+        let counts = mesh_shadow_edges(&self.mesh, &self.geometry, &mut self.edges);
+        tracing::debug!(?counts, "mesh shadow edges");
     }
 }

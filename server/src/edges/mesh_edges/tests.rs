@@ -108,7 +108,7 @@ fn check(g: &Geometry, mesh: &DiscontinuityMesh, rng: &mut Rng) -> usize {
                             let mut found = None;
                             for k in [1.0, 10.0, 100.0, 1e3, 1e4] {
                                 let qk = mid + (q - mid) * k;
-                                if !inside(&r.corners, qk) || lighting_at(m, g, light, qk, &mut hit) != Lighting::Penumbra {
+                                if !r.contains(qk) || lighting_at(m, g, light, qk, &mut hit) != Lighting::Penumbra {
                                     break;
                                 }
                                 let pk = (r.to3(qk) + r.n * (10.0 * r.tol)).as_vec3();
