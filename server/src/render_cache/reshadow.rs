@@ -60,11 +60,15 @@ pub struct Reshadowed {
 /// A point's verdict: the worst over the lights whose segment meets `boxes`.
 #[inline]
 pub fn verdict(p: Vec3, boxes: &[(Vec3, Vec3, Vec3)], query: &dyn ShadowQuery) -> ShadowChange {
+    worst_change(p, boxes.iter().enumerate().filter(|(_, &(c, lo, hi))| super::segment_hits_box(p, c, lo, hi)).map(|(l, _)| l), query)
+}
+
+/// The worst of `query`'s answers at `p` over the lights `lights` (indices), stopping at the
+/// first [`ShadowChange::Changed`].
+#[inline]
+pub fn worst_change(p: Vec3, lights: impl Iterator<Item = usize>, query: &dyn ShadowQuery) -> ShadowChange {
     let mut worst = ShadowChange::Unchanged;
-    for (l, &(c, lo, hi)) in boxes.iter().enumerate() {
-        if !super::segment_hits_box(p, c, lo, hi) {
-            continue;
-        }
+    for l in lights {
         match query.change(p, l) {
             ShadowChange::Changed => return ShadowChange::Changed,
             ShadowChange::Unknown => worst = ShadowChange::Unknown,

@@ -21,7 +21,7 @@ use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
 use super::move_shadows::{MoveQuery, MoveShadows};
-use crate::render_cache::reshadow::{ShadowChange, ShadowQuery};
+use crate::render_cache::reshadow::{worst_change, ShadowChange};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
@@ -769,17 +769,13 @@ impl FrameLoop {
                 continue;
             }
             let query = MoveQuery::new(self.move_shadows.get(m.object), &m.from, &self.transforms[m.object as usize], &self.lights);
-            for (l, light) in self.lights.iter().enumerate() {
-                // A segment that misses every box the object swept since then cannot have
-                // changed (both its places are in them): no exact test needed.
-                if !since().filter(|e| e.object == m.object).any(|e| light.may_shadow(p, e.region)) {
-                    continue;
-                }
-                match query.change(p, l) {
-                    ShadowChange::Changed => return ShadowChange::Changed,
-                    ShadowChange::Unknown => worst = ShadowChange::Unknown,
-                    ShadowChange::Unchanged => {}
-                }
+            // A segment that misses every box the object swept since then cannot have
+            // changed (both its places are in them): no exact test needed.
+            let swept = (0..self.lights.len()).filter(|&l| since().filter(|e| e.object == m.object).any(|e| self.lights[l].may_shadow(p, e.region)));
+            match worst_change(p, swept, &query) {
+                ShadowChange::Changed => return ShadowChange::Changed,
+                ShadowChange::Unknown => worst = ShadowChange::Unknown,
+                ShadowChange::Unchanged => {}
             }
         }
         worst
