@@ -173,10 +173,13 @@ async fn session(url: &str, start: pb::Start, frames: u32) -> Result<(SessionFig
             Some(Ok(Event::Rejected(r))) => bail!("server rejected a message: {}", r.message),
             Some(Ok(Event::Frame(f))) => {
                 first_at.get_or_insert_with(Instant::now);
-                all.push(f.total_ms);
+                // The loop's whole work for the frame: its total and the picking of the next
+                // samples after it was published.
+                let ms = f.total_ms + f.after_ms;
+                all.push(ms);
                 samples.push(f.samples_used as f64);
                 if f.edges.as_ref().is_some_and(|e| e.edge_trees) {
-                    trees.push(f.total_ms);
+                    trees.push(ms);
                 }
             }
             Some(Ok(_)) => {}

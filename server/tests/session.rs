@@ -39,9 +39,13 @@ async fn cornell_session_streams_frames_that_fill_with_samples() {
         assert_eq!((f.width, f.height, f.encoding), (64, 48, pb::FrameEncoding::Qoi as i32));
         let px = decode_frame(&f.data, pb::FrameEncoding::Qoi, 64, 48).unwrap();
         assert_eq!(px.len(), 64 * 48);
-        assert_eq!(f.stages.last().unwrap().stage, "encode", "stages in pipeline order, encode last");
-        assert!(f.stages.iter().any(|s| s.stage == "sampling"));
-        assert!(f.total_ms >= f.stages.iter().map(|s| s.ms).sum::<f64>() * 0.99);
+        // The frame's own stages in pipeline order, encode last; then the picking and the
+        // requests made after the frame before was published, in after_ms, not in total_ms.
+        let (own, after) = f.stages.split_at(f.stages.len() - 2);
+        assert_eq!(own.last().unwrap().stage, "encode", "stages in pipeline order, encode last");
+        assert_eq!([after[0].stage.as_str(), after[1].stage.as_str()], ["sampling", "requests"]);
+        assert!((f.after_ms - (after[0].ms + after[1].ms)).abs() < 1e-9, "after_ms {} is the picking's time", f.after_ms);
+        assert!(f.total_ms >= own.iter().map(|s| s.ms).sum::<f64>() * 0.99);
         let p = f.pixels.unwrap();
         assert_eq!(p.with_point + p.filled + p.empty, 64 * 48);
         assert!(p.cache_points > 0);

@@ -80,6 +80,9 @@ pub struct FrameStats {
     /// Server milliseconds spent, before this frame, inserting samples that arrived while
     /// it waited for the frame (not in `total_ms`).
     pub between_ms: f64,
+    /// Server milliseconds spent after publishing the frame before this one on picking the
+    /// pixels to shade next and sending their requests (not in `total_ms`).
+    pub after_ms: f64,
     /// Server seconds since session start when the frame was made.
     pub sim_time: f64,
     /// Viewer seconds since the session started when the frame arrived.
@@ -278,6 +281,7 @@ impl FrameStats {
             live_workers: f.live_workers,
             frames_dropped: f.frames_dropped,
             between_ms: f.between_ms,
+            after_ms: f.after_ms,
             sim_time: f.sim_time,
             received_s: a.received_s,
             interval_ms: a.interval_ms,

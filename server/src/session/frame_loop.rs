@@ -211,6 +211,11 @@ pub(super) struct FrameLoop {
     between: (u32, f64),
     /// The time of those inserted before the frame being made (`Frame.between_ms`).
     between_ms: f64,
+    /// The stages run after the last frame was published (picking the pixels to shade and
+    /// sending their requests: [`Self::request_next`]), reported with the next frame.
+    after_times: StageTimes,
+    /// Requests sent since the last frame was published (`Frame.samples_requested`).
+    requested: u32,
     picks: Vec<PixelRequest>,
     batches: Vec<pb::RequestBatch>,
     next_batch_id: u64,
@@ -286,6 +291,8 @@ impl FrameLoop {
             answers: Vec::new(),
             between: (0, 0.0),
             between_ms: 0.0,
+            after_times: StageTimes::new(),
+            requested: 0,
             picks: Vec::new(),
             batches: Vec::new(),
             next_batch_id: 0,
@@ -334,41 +341,11 @@ impl FrameLoop {
         self.times.add("samples", ms_since(t));
 
         let (counts, epi_counts) = self.reconstruct();
-        let t = Instant::now();
-        let pixels = self.width as usize * self.height as usize;
-        let per_frame = self.settings.frame_budget(pixels);
-        // The dispatcher counts parts; the budget counts samples (pixels shaded whole).
-        let parts = self.split.parts() as f64;
-        let (refill, frames) = if self.still_frames >= REST_AFTER_FRAMES {
-            (frame_periods(&self.settings, self.still_frames).1, rest_frames(&self.settings))
-        } else {
-            (Duration::ZERO, 1)
-        };
-        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second() / parts, refill, frames);
-        let outstanding = self.dispatcher.outstanding_requests() as usize / parts as usize;
-        let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
-        self.still_frames = self.still_frames.saturating_add(1);
-        let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
-        self.picks.clear();
-        if budget > 0 {
-            let ages = &self.cache.point_image().age;
-            self.sampler.select(self.cache.filter_weights(), ages, &cfg, budget, &mut self.picks);
-            // Re-picked points are shaded again where they are, so the cache averages their
-            // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
-            let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;
-            let flags = self.epi.flags();
-            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || flags.get(x as usize, y as usize, Flags::USABLE));
-        }
-        self.times.add("sampling", ms_since(t));
-
-        let t = Instant::now();
-        let samples_requested = self.send_requests();
-        self.times.add("requests", ms_since(t));
-
         if !self.shown && self.cache.is_empty() {
             // Nothing to show yet (the workers are loading the scene, or the first samples
             // are on their way): say so instead of sending a black frame.
             self.report_waiting();
+            self.request_next();
             return;
         }
         if !self.shown {
@@ -397,7 +374,48 @@ impl FrameLoop {
             }
         };
         self.times.add("encode", ms_since(t));
-        self.publish(t0, data, counts, epi_counts, samples_used, samples_requested);
+        self.publish(t0, data, counts, epi_counts, samples_used);
+        self.request_next();
+    }
+
+    /// Picks the pixels to shade next from the frame just reconstructed (its filter weights,
+    /// its points' ages, its usable samples) and sends their requests, after the frame is
+    /// published so the viewer does not wait for them. The workers lose nothing by it: the
+    /// in-flight bound keeps 100 ms or more of earlier requests queued at them. Timed as the
+    /// stages `sampling` and `requests`, reported with the next frame (`Frame.after_ms`,
+    /// outside its `total_ms`).
+    fn request_next(&mut self) {
+        self.after_times.clear();
+        let t = Instant::now();
+        let pixels = self.width as usize * self.height as usize;
+        let per_frame = self.settings.frame_budget(pixels);
+        // The dispatcher counts parts; the budget counts samples (pixels shaded whole).
+        let parts = self.split.parts() as f64;
+        let (refill, frames) = if self.still_frames >= REST_AFTER_FRAMES {
+            (frame_periods(&self.settings, self.still_frames).1, rest_frames(&self.settings))
+        } else {
+            (Duration::ZERO, 1)
+        };
+        let max_outstanding = max_outstanding(per_frame, self.dispatcher.samples_per_second() / parts, refill, frames);
+        let outstanding = self.dispatcher.outstanding_requests() as usize / parts as usize;
+        let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
+        self.still_frames = self.still_frames.saturating_add(1);
+        let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
+        self.picks.clear();
+        if budget > 0 {
+            let ages = &self.cache.point_image().age;
+            self.sampler.select(self.cache.filter_weights(), ages, &cfg, budget, &mut self.picks);
+            // Re-picked points are shaded again where they are, so the cache averages their
+            // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
+            let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;
+            let flags = self.epi.flags();
+            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || flags.get(x as usize, y as usize, Flags::USABLE));
+        }
+        self.after_times.add("sampling", ms_since(t));
+
+        let t = Instant::now();
+        self.requested += self.send_requests();
+        self.after_times.add("requests", ms_since(t));
     }
 
     /// Edges, reprojection and the frame's reconstruction (edge-and-point, or the Render
@@ -466,7 +484,7 @@ impl FrameLoop {
         (counts, epi_counts)
     }
 
-    fn publish(&mut self, t0: Instant, data: Vec<u8>, counts: FrameCounts, epi: Option<EpiCounts>, samples_used: u32, samples_requested: u32) {
+    fn publish(&mut self, t0: Instant, data: Vec<u8>, counts: FrameCounts, epi: Option<EpiCounts>, samples_used: u32) {
         let epi = epi.unwrap_or_default();
         self.sequence += 1;
         self.counters.frames += 1;
@@ -476,10 +494,11 @@ impl FrameLoop {
             height: self.height,
             encoding: self.encoding as i32,
             data,
-            stages: self.times.stages.iter().map(|&(stage, ms)| pb::StageTime { stage: stage.to_string(), ms }).collect(),
+            // This frame's stages, then the picking and requests made after the frame before.
+            stages: self.times.stages.iter().chain(&self.after_times.stages).map(|&(stage, ms)| pb::StageTime { stage: stage.to_string(), ms }).collect(),
             total_ms: ms_since(t0),
             samples_used,
-            samples_requested,
+            samples_requested: std::mem::take(&mut self.requested),
             outstanding: self.dispatcher.outstanding_requests().min(u32::MAX as u64) as u32,
             pixels: Some(pb::PixelCounts {
                 with_point: counts.with_point,
@@ -512,6 +531,7 @@ impl FrameLoop {
             camera: Some(camera_to_wire(&self.camera)),
             overlay: overlay_to_wire(self.settings.overlay) as i32,
             between_ms: self.between_ms,
+            after_ms: self.after_times.total_ms(),
         };
         self.out.publish_frame(frame);
     }

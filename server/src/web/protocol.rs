@@ -187,6 +187,7 @@ pub fn frame_header(f: &pb::Frame, tiles: &[u32], sent_ms: f64, latency_ms: Opti
         "samples_requested": f.samples_requested,
         "frames_dropped": f.frames_dropped,
         "between_ms": f.between_ms,
+        "after_ms": f.after_ms,
         "live_workers": f.live_workers,
         "camera": camera(&f.camera),
         "epoch": f.epoch,
