@@ -58,6 +58,22 @@ fn row_chunks<'a>(buf: &'a mut [Vec3], rank: &[u32], words: usize, h: usize) -> 
     chunks
 }
 
+/// The columns of row `y`'s simple pixels, in scan order (their compact indices follow
+/// from the row's first, `rank[y * words]`).
+#[inline(always)]
+fn simple_in_row(flags: &Flags, y: usize) -> impl Iterator<Item = usize> + '_ {
+    flags.row(y, Flags::SIMPLE).iter().enumerate().flat_map(|(j, &word)| {
+        let mut bits = word;
+        std::iter::from_fn(move || {
+            (bits != 0).then(|| {
+                let i = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                64 * j + i
+            })
+        })
+    })
+}
+
 impl SimpleColours {
     /// Bytes at most, for a `width` × `height` image: the ranks, and two colours per simple
     /// pixel if every pixel were simple (they grow to the frame with the most).
@@ -90,15 +106,8 @@ impl SimpleColours {
         self.primary.resize(total as usize, Vec3::ZERO);
         self.secondary.resize(total as usize, NONE);
         row_chunks(&mut self.primary, &self.rank, words, h).into_par_iter().enumerate().for_each(|(y, out)| {
-            let mut n = 0;
-            for j in 0..words {
-                let mut bits = flags.row(y, Flags::SIMPLE)[j];
-                while bits != 0 {
-                    let i = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    out[n] = image[y * w + 64 * j + i];
-                    n += 1;
-                }
+            for (o, x) in out.iter_mut().zip(simple_in_row(flags, y)) {
+                *o = image[y * w + x];
             }
         });
     }
@@ -152,30 +161,22 @@ pub fn antialias(pixels: &[EpiPixel], flags: &Flags, filled: &[u64], nb: &Neighb
     // non-simple pixels of the image): the primary colour of the first candidate whose
     // primary region this pixel's secondary region meets.
     row_chunks(secondary, rank, words, h).into_par_iter().enumerate().for_each(|(y, out)| {
-        let mut n = 0;
-        for j in 0..words {
-            let mut bits = flags.row(y, Flags::SIMPLE)[j];
-            while bits != 0 {
-                let i = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let x = 64 * j + i;
-                let p = pixels[y * w + x];
-                out[n] = NONE;
-                for d in t.pixel.aa_candidates(p.code(), !p.primary_b()) {
-                    if d == 0xFF {
-                        break;
-                    }
-                    let Some((nx, ny)) = meets(x, y, d as usize, SP) else { continue };
-                    if !filled_at(nx, ny) {
-                        continue;
-                    }
-                    let c = if is_simple(nx, ny) { primary[index(nx, ny)] } else { img[ny * w + nx] };
-                    if c.is_finite() {
-                        out[n] = c;
-                        break;
-                    }
+        for (o, x) in out.iter_mut().zip(simple_in_row(flags, y)) {
+            let p = pixels[y * w + x];
+            *o = NONE;
+            for d in t.pixel.aa_candidates(p.code(), !p.primary_b()) {
+                if d == 0xFF {
+                    break;
                 }
-                n += 1;
+                let Some((nx, ny)) = meets(x, y, d as usize, SP) else { continue };
+                if !filled_at(nx, ny) {
+                    continue;
+                }
+                let c = if is_simple(nx, ny) { primary[index(nx, ny)] } else { img[ny * w + nx] };
+                if c.is_finite() {
+                    *o = c;
+                    break;
+                }
             }
         }
     });
@@ -187,46 +188,39 @@ pub fn antialias(pixels: &[EpiPixel], flags: &Flags, filled: &[u64], nb: &Neighb
         .par_chunks_mut(w)
         .enumerate()
         .map(|(y, row)| {
-            let mut n = rank[y * words] as usize;
             let mut mixed = 0u32;
-            for j in 0..words {
-                let mut bits = flags.row(y, Flags::SIMPLE)[j];
-                while bits != 0 {
-                    let i = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let x = 64 * j + i;
-                    let p = pixels[y * w + x];
-                    let own = primary[n];
-                    let mut second = secondary[n];
-                    if second.x.is_nan() {
-                        let (mut sum, mut count) = (Vec3::ZERO, 0.0f32);
-                        for d in 0..4 {
-                            let Some((nx, ny)) = meets(x, y, d, SS) else { continue };
-                            // Sc↔Sn holds only for a simple neighbour (checked, as the
-                            // index assumes it).
-                            if !is_simple(nx, ny) {
-                                continue;
-                            }
-                            let c = secondary[index(nx, ny)];
-                            if !c.x.is_nan() {
-                                sum += c;
-                                count += 1.0;
-                            }
+            for (k, x) in simple_in_row(flags, y).enumerate() {
+                let n = rank[y * words] as usize + k;
+                let p = pixels[y * w + x];
+                let own = primary[n];
+                let mut second = secondary[n];
+                if second.x.is_nan() {
+                    let (mut sum, mut count) = (Vec3::ZERO, 0.0f32);
+                    for d in 0..4 {
+                        let Some((nx, ny)) = meets(x, y, d, SS) else { continue };
+                        // Sc↔Sn holds only for a simple neighbour (checked, as the index
+                        // assumes it).
+                        if !is_simple(nx, ny) {
+                            continue;
                         }
-                        if count > 0.0 {
-                            second = sum / count;
+                        let c = secondary[index(nx, ny)];
+                        if !c.x.is_nan() {
+                            sum += c;
+                            count += 1.0;
                         }
                     }
-                    row[x] = if second.x.is_nan() {
-                        own
-                    } else {
-                        let area_a = t.pixel.area_a(p.code());
-                        let primary_area = if p.primary_b() { 1.0 - area_a } else { area_a };
-                        mixed += 1;
-                        own * primary_area + second * (1.0 - primary_area)
-                    };
-                    n += 1;
+                    if count > 0.0 {
+                        second = sum / count;
+                    }
                 }
+                row[x] = if second.x.is_nan() {
+                    own
+                } else {
+                    let area_a = t.pixel.area_a(p.code());
+                    let primary_area = if p.primary_b() { 1.0 - area_a } else { area_a };
+                    mixed += 1;
+                    own * primary_area + second * (1.0 - primary_area)
+                };
             }
             mixed
         })

@@ -67,8 +67,47 @@ fn sides_of(cell: Cell, code: u16, x: usize, y: usize, colour_at: &impl Fn([f64;
     (ca, cb, side_a_area(p, q), extremes)
 }
 
-fn assert_close(got: Vec3, want: Vec3, tol: f32, at: &str) {
-    assert!((got - want).abs().max_element() <= tol * want.abs().max_element().max(1.0), "{at}: {got} against {want}");
+/// A simple pixel of a reconstruction and what [`sides_of`] says of it.
+struct Simple {
+    x: usize,
+    y: usize,
+    at: String,
+    got: Vec3,
+    area_a: f64,
+    extremes: [f64; 4],
+}
+
+impl Simple {
+    /// Checks the pixel against the exact box-filtered mean of a pixel covered `exact` by
+    /// `inside` and otherwise by `outside`: within the crossing quantisation (the largest
+    /// change of the area over the edges the crossings allow, at most 1/8).
+    fn assert_within_quantisation(&self, exact: f32, inside: Vec3, outside: Vec3) {
+        let exact_mean = inside * exact + outside * (1.0 - exact);
+        let quantisation = self.extremes.iter().map(|e| (e - self.area_a).abs()).fold(0.0, f64::max) as f32;
+        assert!(quantisation <= 1.0 / 8.0, "{}: {:?}", self.at, self.extremes);
+        let bound = (inside - outside).abs() * quantisation + Vec3::splat(1e-4);
+        assert!((self.got - exact_mean).abs().cmple(bound).all(), "{}: {} against the exact mean {exact_mean}, quantisation {quantisation}", self.at, self.got);
+    }
+}
+
+/// The simple pixels of a two-colour reconstruction, each checked to show the mix of both
+/// colours with its quantised edge's areas (its secondary colour found).
+fn simple_pixels(epi: &Epi, image: &[Vec3], trial: usize, colour_at: &impl Fn([f64; 2]) -> Vec3) -> Vec<Simple> {
+    let w = epi.width() as usize;
+    let mut out = Vec::new();
+    for (i, px) in epi.pixels().iter().enumerate() {
+        if !px.is_simple() {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let at = format!("trial {trial}, pixel ({x},{y}), code {}", px.code());
+        let (ca, cb, area_a, extremes) = sides_of(PIXEL, px.code(), x, y, colour_at);
+        assert_ne!(ca, cb, "{at}: the edge splits the pixel");
+        let (got, want) = (image[i], ca * area_a as f32 + cb * (1.0 - area_a as f32));
+        assert!((got - want).abs().max_element() <= 1e-5 * want.abs().max_element().max(1.0), "{at}: {got} against {want}");
+        out.push(Simple { x, y, at, got, area_a, extremes });
+    }
+    out
 }
 
 #[test]
@@ -85,33 +124,14 @@ fn a_pixel_on_a_straight_edge_is_the_area_weighted_mean_within_the_crossing_quan
         let colour_at = |r: [f64; 2]| if orient(p0, p1, r) > 0.0 { inside } else { outside };
         let points = points_coloured(w, h, &mut rng, colour_at, |_, _| false);
         let (epi, image, antialiased) = reconstruct(w, h, &[(p0, p1)], &points);
-        let mut simple = 0u32;
-        for y in 0..h {
-            for x in 0..w {
-                let px = epi.pixels()[y * w + x];
-                if !px.is_simple() {
-                    continue;
-                }
-                simple += 1;
-                let at = format!("trial {trial}, pixel ({x},{y}), code {}", px.code());
-                let (ca, cb, area_a, extremes) = sides_of(PIXEL, px.code(), x, y, &colour_at);
-                assert_ne!(ca, cb, "{at}: the line splits the pixel");
-                // The mix with the quantised edge's areas: both colours, the secondary found.
-                let got = image[y * w + x];
-                let want = ca * area_a as f32 + cb * (1.0 - area_a as f32);
-                assert_close(got, want, 1e-5, &at);
-                // The exact box-filtered mean: the pixel's area on the line's `inside` side.
-                let local = |r: [f64; 2]| [r[0] - x as f64, r[1] - y as f64];
-                let exact = side_a_area(local(p0), local(p1));
-                let exact_mean = inside * exact as f32 + outside * (1.0 - exact as f32);
-                let quantisation = extremes.iter().map(|e| (e - area_a).abs()).fold(0.0, f64::max);
-                assert!(quantisation <= 1.0 / 8.0, "{at}: {extremes:?}");
-                let bound = (inside - outside).abs() * quantisation as f32 + Vec3::splat(1e-4);
-                assert!((got - exact_mean).abs().cmple(bound).all(), "{at}: {got} against the exact mean {exact_mean}, quantisation {quantisation}");
-            }
+        let simple = simple_pixels(&epi, &image, trial, &colour_at);
+        for px in &simple {
+            // The pixel's exact area on the line's `inside` side.
+            let local = |r: [f64; 2]| [r[0] - px.x as f64, r[1] - px.y as f64];
+            px.assert_within_quantisation(side_a_area(local(p0), local(p1)) as f32, inside, outside);
         }
-        assert!(simple as usize >= w.min(h), "trial {trial}: {simple} simple pixels");
-        assert_eq!(antialiased, simple, "trial {trial}: every simple pixel took a secondary colour");
+        assert!(simple.len() >= w.min(h), "trial {trial}: {} simple pixels", simple.len());
+        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
     }
 }
 
@@ -129,9 +149,9 @@ fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_s
     let mut corners_seen = 0;
     for trial in 0..32 {
         // Corners at 0.2–0.8 of their pixels.
-        let at = |rng: &mut Rng, lo: f64, span: f64| lo + (rng.f64() * span).floor() + 0.2 + 0.6 * rng.f64();
-        let (x0, x1) = (at(&mut rng, 6.0, 8.0), at(&mut rng, 22.0, 10.0));
-        let (y0, y1) = (at(&mut rng, 5.0, 6.0), at(&mut rng, 18.0, 8.0));
+        let place = |rng: &mut Rng, lo: f64, span: f64| lo + (rng.f64() * span).floor() + 0.2 + 0.6 * rng.f64();
+        let (x0, x1) = (place(&mut rng, 6.0, 8.0), place(&mut rng, 22.0, 10.0));
+        let (y0, y1) = (place(&mut rng, 5.0, 6.0), place(&mut rng, 18.0, 8.0));
         let colour_at = |r: [f64; 2]| if r[0] > x0 && r[0] < x1 && r[1] > y0 && r[1] < y1 { inside } else { outside };
         // The pixels holding a corner have no point: a straight edge cuts the corner off as a
         // triangle, so a point inside the rectangle may lie on the quantised edge's outer
@@ -142,33 +162,19 @@ fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_s
         let points = points_coloured(w, h, &mut rng, colour_at, corner);
         let segments = [([x0, y0], [x1, y0]), ([x1, y0], [x1, y1]), ([x1, y1], [x0, y1]), ([x0, y1], [x0, y0])];
         let (epi, image, antialiased) = reconstruct(w, h, &segments, &points);
-        let mut simple = 0u32;
-        for y in 0..h {
-            for x in 0..w {
-                let px = epi.pixels()[y * w + x];
-                if !px.is_simple() {
-                    continue;
-                }
-                simple += 1;
-                let at = format!("trial {trial}, pixel ({x},{y}), code {}", px.code());
-                let (ca, cb, area_a, extremes) = sides_of(PIXEL, px.code(), x, y, &colour_at);
-                let got = image[y * w + x];
-                assert_close(got, ca * area_a as f32 + cb * (1.0 - area_a as f32), 1e-5, &at);
-                if corner(x, y) {
-                    // The quantised edge cuts a triangle where the rectangle's corner is: the
-                    // mean is not within the quantisation there, but both colours are in it.
-                    corners_seen += 1;
-                    assert!((got - outside).max_element() > 0.1 && (inside - got).min_element() > 0.1, "{at}: {got}");
-                } else {
-                    let overlap = |lo: f64, hi: f64, p: usize| (hi.min(p as f64 + 1.0) - lo.max(p as f64)).max(0.0);
-                    let exact = (overlap(x0, x1, x) * overlap(y0, y1, y)) as f32;
-                    let exact_mean = inside * exact + outside * (1.0 - exact);
-                    let quantisation = extremes.iter().map(|e| (e - area_a).abs()).fold(0.0, f64::max) as f32;
-                    assert!((got - exact_mean).abs().cmple((inside - outside).abs() * quantisation + Vec3::splat(1e-4)).all(), "{at}: {got} against {exact_mean}");
-                }
+        let simple = simple_pixels(&epi, &image, trial, &colour_at);
+        for px in &simple {
+            if corner(px.x, px.y) {
+                // The quantised edge cuts a triangle where the rectangle's corner is: the mean
+                // is not within the quantisation there, but both colours are in it.
+                corners_seen += 1;
+                assert!((px.got - outside).max_element() > 0.1 && (inside - px.got).min_element() > 0.1, "{}: {}", px.at, px.got);
+            } else {
+                let overlap = |lo: f64, hi: f64, p: usize| (hi.min(p as f64 + 1.0) - lo.max(p as f64)).max(0.0);
+                px.assert_within_quantisation((overlap(x0, x1, px.x) * overlap(y0, y1, px.y)) as f32, inside, outside);
             }
         }
-        assert_eq!(antialiased, simple, "trial {trial}: every simple pixel took a secondary colour");
+        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
     }
     assert!(corners_seen >= 32 * 3, "{corners_seen} simple corner pixels");
 }
