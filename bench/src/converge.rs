@@ -10,6 +10,11 @@
 //!   (pixels without one are black). The workers load the scene before its time starts.
 //!
 //! The verdict says whether edge-and-point is ahead (higher PSNR) at every time point.
+//!
+//! Where each renderer's last image is wrong: the squared error (sRGB, as the PSNR counts it)
+//! of the worst pixels and the worst rows, as shares of the whole image's, with the pixels'
+//! shown and reference colours (`*_error` in the JSON; `--out` adds error maps). A plateau
+//! that sits in a few pixels is reconstruction, not noise.
 use crate::frame::{converged_reference, open_dispatcher, start_cluster, start_message, PaceArgs, SceneArgs};
 use crate::inprocess::write_image;
 use anyhow::{bail, Context, Result};
@@ -122,6 +127,8 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             write_image(&dir.join("converge_edge_and_point"), args.format, a.width, a.height, &epr_image)?;
             write_image(&dir.join("converge_progressive"), args.format, a.width, a.height, &progressive_image)?;
             write_image(&dir.join(format!("reference_{spp}spp")), args.format, a.width, a.height, &reference)?;
+            write_error_map(&dir.join("converge_edge_and_point_error.png"), a.width, a.height, &epr_image, &reference)?;
+            write_error_map(&dir.join("converge_progressive_error.png"), a.width, a.height, &progressive_image, &reference)?;
         }
         let series = |v: &[Point]| {
             json!({
@@ -145,6 +152,8 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             "edge_and_point_frames": frames,
             "progressive": series(&progressive),
             "progressive_passes": passes,
+            "edge_and_point_error": hotspots(&epr_image, &reference, a.width as usize),
+            "progressive_error": hotspots(&progressive_image, &reference, a.width as usize),
             "ahead_at_every_time_point": behind.is_empty(),
             "behind_at_s": behind,
             "verdict": verdict,
@@ -165,6 +174,42 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         crate::emit(args.json, &out, &table);
         Ok(())
     })
+}
+
+/// Squared error of each pixel in sRGB, summed over the channels (what [`psnr`] averages).
+fn pixel_errors(image: &[Vec3], reference: &[Vec3]) -> Vec<f64> {
+    use edgepoint_server::image_metrics::linear_to_srgb;
+    image.iter().zip(reference).map(|(c, r)| (0..3).map(|k| (linear_to_srgb(c[k]) as f64 - linear_to_srgb(r[k]) as f64).powi(2)).sum()).collect()
+}
+
+/// Where `image` is wrong: the shares of the squared error in the worst 1 % of the pixels,
+/// the ten worst pixels (position, shown and reference colour) and the five worst rows.
+fn hotspots(image: &[Vec3], reference: &[Vec3], width: usize) -> serde_json::Value {
+    let err = pixel_errors(image, reference);
+    let total: f64 = err.iter().sum();
+    if total <= 0.0 || width == 0 {
+        return json!({ "squared_error": total });
+    }
+    let mut order: Vec<usize> = (0..err.len()).collect();
+    order.sort_by(|&a, &b| err[b].total_cmp(&err[a]));
+    let top1: f64 = order[..err.len().div_ceil(100)].iter().map(|&i| err[i]).sum();
+    let colour = |c: Vec3| [c.x, c.y, c.z];
+    let pixels: Vec<_> = order[..10.min(order.len())]
+        .iter()
+        .map(|&i| json!({ "x": i % width, "y": i / width, "share": err[i] / total, "shown": colour(image[i]), "reference": colour(reference[i]) }))
+        .collect();
+    let mut rows: Vec<(usize, f64)> = err.chunks(width).map(|r| r.iter().sum()).enumerate().collect();
+    rows.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let rows: Vec<_> = rows[..5.min(rows.len())].iter().map(|&(y, e)| json!({ "y": y, "share": e / total })).collect();
+    json!({ "squared_error": total, "share_in_worst_1_percent_of_pixels": top1 / total, "worst_pixels": pixels, "worst_rows": rows })
+}
+
+/// A grey map of the square root of each pixel's squared error, scaled to its largest.
+fn write_error_map(path: &std::path::Path, w: u32, h: u32, image: &[Vec3], reference: &[Vec3]) -> Result<()> {
+    let err = pixel_errors(image, reference);
+    let max = err.iter().cloned().fold(0.0, f64::max).sqrt().max(1e-12);
+    let bytes: Vec<u8> = err.iter().map(|e| (255.0 * e.sqrt() / max).round() as u8).collect();
+    image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::L8).with_context(|| format!("writing {}", path.display()))
 }
 
 /// PSNR of `image` against `reference`, logged as progress.
@@ -304,6 +349,26 @@ mod tests {
         assert_eq!(time_points(3.0, 1.0), vec![0.25, 0.5, 1.0, 2.0, 3.0]);
         assert_eq!(time_points(0.4, 1.0), vec![0.25]);
         assert_eq!(time_points(30.0, 5.0), vec![1.25, 2.5, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0]);
+    }
+
+    #[test]
+    fn hotspots_name_the_worst_pixels_and_rows_with_their_shares() {
+        // A 4 x 3 image, exact but for pixel (1, 2) (error 3 x 0.25) and pixel (3, 0)
+        // (error 0.25 in one channel).
+        let reference = vec![Vec3::ZERO; 12];
+        let mut image = reference.clone();
+        image[2 * 4 + 1] = Vec3::splat(edgepoint_server::image_metrics::srgb_to_linear(0.5));
+        image[3] = Vec3::new(edgepoint_server::image_metrics::srgb_to_linear(0.5), 0.0, 0.0);
+        let h = hotspots(&image, &reference, 4);
+        assert!((h["squared_error"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{h}");
+        assert_eq!((h["worst_pixels"][0]["x"].as_u64(), h["worst_pixels"][0]["y"].as_u64()), (Some(1), Some(2)));
+        assert!((h["worst_pixels"][0]["share"].as_f64().unwrap() - 0.75).abs() < 1e-6, "{h}");
+        assert!((h["worst_pixels"][1]["share"].as_f64().unwrap() - 0.25).abs() < 1e-6, "{h}");
+        // 1 % of 12 pixels rounds up to the worst one.
+        assert!((h["share_in_worst_1_percent_of_pixels"].as_f64().unwrap() - 0.75).abs() < 1e-6, "{h}");
+        assert_eq!(h["worst_rows"][0]["y"].as_u64(), Some(2));
+        assert_eq!(h["worst_rows"][1]["y"].as_u64(), Some(0));
+        assert_eq!(hotspots(&reference, &reference, 4)["squared_error"].as_f64(), Some(0.0));
     }
 
     #[test]

@@ -1,0 +1,180 @@
+//! Anti-aliasing against closed forms: images of two constant colours split by straight
+//! edges (a line across the image, a rectangle), sampled at every pixel, reconstructed by
+//! the whole pipeline. A simple pixel must show the area-weighted mix of the two colours
+//! with the quantised edge's areas — its secondary colour found — and so lie within the
+//! 1/8-pixel crossing quantisation of the exact box-filtered mean.
+use crate::epi::code::{Cell, PIXEL};
+use crate::epi::tables::{orient, side_a_area};
+use crate::epi::testutil::{draw_segment, Rng};
+use crate::epi::{Epi, InterpOptions};
+use crate::render_cache::{PointImage, NO_POINT};
+use crate::stage_times::StageTimes;
+use glam::Vec3;
+
+/// A point at a random position in every pixel but those `skip` names, coloured by
+/// `colour_at` (image coordinates).
+fn points_coloured(w: usize, h: usize, rng: &mut Rng, colour_at: impl Fn([f64; 2]) -> Vec3, skip: impl Fn(usize, usize) -> bool) -> PointImage {
+    let mut pi = PointImage { width: w as u32, height: h as u32, ..Default::default() };
+    for i in 0..w * h {
+        let (u, v) = (rng.unit(), rng.unit());
+        let has = !skip(i % w, i / w);
+        pi.point.push(if has { i as u32 } else { NO_POINT });
+        pi.depth.push(if has { 1.0 } else { f32::INFINITY });
+        pi.subpixel.push([u, v]);
+        pi.color.push(if has { colour_at([(i % w) as f64 + u as f64, (i / w) as f64 + v as f64]) } else { Vec3::ZERO });
+        pi.age.push(if has { 1.0 } else { f32::INFINITY });
+    }
+    pi
+}
+
+/// Builds the EPI of `segments` over `points` and reconstructs it (no complex filter).
+fn reconstruct(w: usize, h: usize, segments: &[([f64; 2], [f64; 2])], points: &PointImage) -> (Epi, Vec<Vec3>, u32) {
+    let mut sides = vec![0u16; (w + 1) * (h + 1)];
+    for &(a, b) in segments {
+        draw_segment(w, h, &mut sides, &mut [], a, b);
+    }
+    let mut epi = Epi::new(w as u32, h as u32);
+    epi.classify_with(sides, Vec::new(), points);
+    let (mut image, mut weights) = (vec![Vec3::ZERO; w * h], vec![0.0; w * h]);
+    let rec = epi.reconstruct(points, Vec3::ZERO, &InterpOptions::default(), false, &mut image, &mut weights, &mut StageTimes::new());
+    (epi, image, rec.antialiased)
+}
+
+/// For simple pixel (x, y) of a two-colour image: the colours of side A and side B of its
+/// quantised edge (the colour a pixel away from the edge's midpoint on each side, beyond
+/// the quantisation band even where one side is a sliver), and side A's area for the
+/// quantised edge and for the four edges between the ends of the two crossed boundary
+/// segments (the extremes of every edge the crossings allow: the area is affine, or
+/// bilinear for adjacent sides, in the two ends' positions along their sides).
+fn sides_of(cell: Cell, code: u16, x: usize, y: usize, colour_at: &impl Fn([f64; 2]) -> Vec3) -> (Vec3, Vec3, f64, [f64; 4]) {
+    let (a, b) = cell.ends(code);
+    let (p, q) = (cell.boundary_point(a), cell.boundary_point(b));
+    let d = [q[0] - p[0], q[1] - p[1]];
+    let len = d[0].hypot(d[1]);
+    // The unit normal towards side A (orient > 0).
+    let n = [-d[1] / len, d[0] / len];
+    let m = [x as f64 + 0.5 * (p[0] + q[0]), y as f64 + 0.5 * (p[1] + q[1])];
+    let ca = colour_at([m[0] + n[0], m[1] + n[1]]);
+    let cb = colour_at([m[0] - n[0], m[1] - n[1]]);
+    // The segments' ends pulled in by a hair: two ends on adjacent sides may be the same
+    // corner, where the line through them has no direction.
+    let inner = |[s, e]: [[f64; 2]; 2]| {
+        let k = 1e-9;
+        [[s[0] + k * (e[0] - s[0]), s[1] + k * (e[1] - s[1])], [e[0] + k * (s[0] - e[0]), e[1] + k * (s[1] - e[1])]]
+    };
+    let (sa, sb) = (inner(cell.segment(a)), inner(cell.segment(b)));
+    let extremes = [side_a_area(sa[0], sb[0]), side_a_area(sa[0], sb[1]), side_a_area(sa[1], sb[0]), side_a_area(sa[1], sb[1])];
+    (ca, cb, side_a_area(p, q), extremes)
+}
+
+/// A simple pixel of a reconstruction and what [`sides_of`] says of it.
+struct Simple {
+    x: usize,
+    y: usize,
+    at: String,
+    got: Vec3,
+    area_a: f64,
+    extremes: [f64; 4],
+}
+
+impl Simple {
+    /// Checks the pixel against the exact box-filtered mean of a pixel covered `exact` by
+    /// `inside` and otherwise by `outside`: within the crossing quantisation (the largest
+    /// change of the area over the edges the crossings allow, at most 1/8).
+    fn assert_within_quantisation(&self, exact: f32, inside: Vec3, outside: Vec3) {
+        let exact_mean = inside * exact + outside * (1.0 - exact);
+        let quantisation = self.extremes.iter().map(|e| (e - self.area_a).abs()).fold(0.0, f64::max) as f32;
+        assert!(quantisation <= 1.0 / 8.0, "{}: {:?}", self.at, self.extremes);
+        let bound = (inside - outside).abs() * quantisation + Vec3::splat(1e-4);
+        assert!((self.got - exact_mean).abs().cmple(bound).all(), "{}: {} against the exact mean {exact_mean}, quantisation {quantisation}", self.at, self.got);
+    }
+}
+
+/// The simple pixels of a two-colour reconstruction, each checked to show the mix of both
+/// colours with its quantised edge's areas (its secondary colour found).
+fn simple_pixels(epi: &Epi, image: &[Vec3], trial: usize, colour_at: &impl Fn([f64; 2]) -> Vec3) -> Vec<Simple> {
+    let w = epi.width() as usize;
+    let mut out = Vec::new();
+    for (i, px) in epi.pixels().iter().enumerate() {
+        if !px.is_simple() {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let at = format!("trial {trial}, pixel ({x},{y}), code {}", px.code());
+        let (ca, cb, area_a, extremes) = sides_of(PIXEL, px.code(), x, y, colour_at);
+        assert_ne!(ca, cb, "{at}: the edge splits the pixel");
+        let (got, want) = (image[i], ca * area_a as f32 + cb * (1.0 - area_a as f32));
+        assert!((got - want).abs().max_element() <= 1e-5 * want.abs().max_element().max(1.0), "{at}: {got} against {want}");
+        out.push(Simple { x, y, at, got, area_a, extremes });
+    }
+    out
+}
+
+#[test]
+fn a_pixel_on_a_straight_edge_is_the_area_weighted_mean_within_the_crossing_quantisation() {
+    let (w, h) = (48, 40);
+    let (inside, outside) = (Vec3::new(17.0, 12.0, 4.0), Vec3::splat(0.02));
+    let mut rng = Rng(7);
+    for trial in 0..24 {
+        // A line across the whole image, at any angle; `inside` on its side A.
+        let angle = rng.f64() * std::f64::consts::PI;
+        let centre = [8.0 + rng.f64() * (w as f64 - 16.0), 8.0 + rng.f64() * (h as f64 - 16.0)];
+        let (dx, dy) = (angle.cos() * 100.0, angle.sin() * 100.0);
+        let (p0, p1) = ([centre[0] - dx, centre[1] - dy], [centre[0] + dx, centre[1] + dy]);
+        let colour_at = |r: [f64; 2]| if orient(p0, p1, r) > 0.0 { inside } else { outside };
+        let points = points_coloured(w, h, &mut rng, colour_at, |_, _| false);
+        let (epi, image, antialiased) = reconstruct(w, h, &[(p0, p1)], &points);
+        let simple = simple_pixels(&epi, &image, trial, &colour_at);
+        for px in &simple {
+            // The pixel's exact area on the line's `inside` side.
+            let local = |r: [f64; 2]| [r[0] - px.x as f64, r[1] - px.y as f64];
+            px.assert_within_quantisation(side_a_area(local(p0), local(p1)) as f32, inside, outside);
+        }
+        assert!(simple.len() >= w.min(h), "trial {trial}: {} simple pixels", simple.len());
+        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
+    }
+}
+
+#[test]
+fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_secondary_colour() {
+    // The luminaire in the ceiling: a bright rectangle whose corners lie inside pixels (at
+    // 0.2–0.8 of them). A corner pixel's crossings are on two adjacent sides (a simple pixel
+    // whose quantised edge cuts the corner off as a triangle); no neighbour's centre lies in
+    // that triangle, and where the rectangle holds less than half of the pixels beside the
+    // corner (a quarter of the corners), their larger, primary region is outside, so only
+    // their secondary regions continue it.
+    let (w, h) = (40, 32);
+    let (inside, outside) = (Vec3::new(17.0, 12.0, 4.0), Vec3::splat(0.02));
+    let mut rng = Rng(11);
+    let mut corners_seen = 0;
+    for trial in 0..32 {
+        // Corners at 0.2–0.8 of their pixels.
+        let place = |rng: &mut Rng, lo: f64, span: f64| lo + (rng.f64() * span).floor() + 0.2 + 0.6 * rng.f64();
+        let (x0, x1) = (place(&mut rng, 6.0, 8.0), place(&mut rng, 22.0, 10.0));
+        let (y0, y1) = (place(&mut rng, 5.0, 6.0), place(&mut rng, 18.0, 8.0));
+        let colour_at = |r: [f64; 2]| if r[0] > x0 && r[0] < x1 && r[1] > y0 && r[1] < y1 { inside } else { outside };
+        // The pixels holding a corner have no point: a straight edge cuts the corner off as a
+        // triangle, so a point inside the rectangle may lie on the quantised edge's outer
+        // side (and the reverse), and no colour is right for both. Their primary region is
+        // then the larger one, coloured from the neighbours, as on `cornell` where the
+        // luminaire's corner is a sixteenth of the pixel.
+        let corner = |x: usize, y: usize| [x0, x1].iter().any(|&cx| cx.floor() as usize == x) && [y0, y1].iter().any(|&cy| cy.floor() as usize == y);
+        let points = points_coloured(w, h, &mut rng, colour_at, corner);
+        let segments = [([x0, y0], [x1, y0]), ([x1, y0], [x1, y1]), ([x1, y1], [x0, y1]), ([x0, y1], [x0, y0])];
+        let (epi, image, antialiased) = reconstruct(w, h, &segments, &points);
+        let simple = simple_pixels(&epi, &image, trial, &colour_at);
+        for px in &simple {
+            if corner(px.x, px.y) {
+                // The quantised edge cuts a triangle where the rectangle's corner is: the mean
+                // is not within the quantisation there, but both colours are in it.
+                corners_seen += 1;
+                assert!((px.got - outside).max_element() > 0.1 && (inside - px.got).min_element() > 0.1, "{}: {}", px.at, px.got);
+            } else {
+                let overlap = |lo: f64, hi: f64, p: usize| (hi.min(p as f64 + 1.0) - lo.max(p as f64)).max(0.0);
+                px.assert_within_quantisation((overlap(x0, x1, px.x) * overlap(y0, y1, px.y)) as f32, inside, outside);
+            }
+        }
+        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
+    }
+    assert!(corners_seen >= 32 * 3, "{corners_seen} simple corner pixels");
+}
