@@ -100,6 +100,21 @@ pub fn row_sum(row: &[f32]) -> f64 {
     (acc[0] + acc[1]) + (acc[2] + acc[3])
 }
 
+/// The largest of a row's priorities (never NaN: see [`priority`]), over eight lanes: one
+/// running maximum is a chain of dependent compares.
+#[inline]
+fn row_max(row: &[f32]) -> f32 {
+    let mut m = [0.0f32; 8];
+    let chunks = row.chunks_exact(8);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for k in 0..8 {
+            m[k] = m[k].max(c[k]);
+        }
+    }
+    tail.iter().chain(&m).fold(0.0f32, |a, &p| a.max(p))
+}
+
 /// Picks the pixels to shade each frame.
 pub struct Sampler {
     width: u32,
@@ -186,6 +201,33 @@ pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::P
     }
 }
 
+/// Of the priorities `c` at scale `s`: how many saturate (`p · s ≥ 1`, picked for sure), and
+/// the sum of the others. Eight lanes of counts and sums, added at the end: the compare and
+/// the select vectorise, where one running f64 sum was a chain of dependent additions (a
+/// water-filling pass took about 2 ns a pixel).
+#[inline]
+fn saturation(c: &[f32], s: f64) -> (f64, f64) {
+    const LANES: usize = 8;
+    let (mut sat, mut rest) = ([0u32; LANES], [0.0f64; LANES]);
+    let chunks = c.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for ch in chunks {
+        for k in 0..LANES {
+            let p = ch[k] as f64;
+            let full = p * s >= 1.0;
+            sat[k] += full as u32;
+            rest[k] += if full { 0.0 } else { p };
+        }
+    }
+    for (k, &p) in tail.iter().enumerate() {
+        let p = p as f64;
+        let full = p * s >= 1.0;
+        sat[k] += full as u32;
+        rest[k] += if full { 0.0 } else { p };
+    }
+    (sat.iter().map(|&n| n as f64).sum(), rest.iter().sum())
+}
+
 impl Sampler {
     /// Bytes [`Self::new`] allocates for a `width` × `height` image.
     pub fn bytes_for(width: u32, height: u32) -> usize {
@@ -270,7 +312,7 @@ impl Sampler {
                     *p = priority(wt, age, max_age);
                 }
                 *sum = row_sum(row);
-                row.iter().fold(0.0f32, |m, &p| m.max(p))
+                row_max(row)
             })
             .reduce(|| 0.0, f32::max);
         let total = self.row_sums.iter().sum::<f64>();
@@ -287,21 +329,7 @@ impl Sampler {
             return s as f32;
         }
         for _ in 0..16 {
-            let (saturated, rest): (f64, f64) = self
-                .prio
-                .par_chunks(16 * 1024)
-                .map(|c| {
-                    let (mut sat, mut rest) = (0.0f64, 0.0f64);
-                    for &p in c {
-                        if p as f64 * s >= 1.0 {
-                            sat += 1.0;
-                        } else {
-                            rest += p as f64;
-                        }
-                    }
-                    (sat, rest)
-                })
-                .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            let (saturated, rest): (f64, f64) = self.prio.par_chunks(16 * 1024).map(|c| saturation(c, s)).reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
             if saturated == 0.0 || rest <= 0.0 {
                 break;
             }
