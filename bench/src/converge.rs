@@ -178,8 +178,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 
 /// Squared error of each pixel in sRGB, summed over the channels (what [`psnr`] averages).
 fn pixel_errors(image: &[Vec3], reference: &[Vec3]) -> Vec<f64> {
-    use edgepoint_server::image_metrics::linear_to_srgb;
-    image.iter().zip(reference).map(|(c, r)| (0..3).map(|k| (linear_to_srgb(c[k]) as f64 - linear_to_srgb(r[k]) as f64).powi(2)).sum()).collect()
+    image.iter().zip(reference).map(|(c, r)| edgepoint_server::image_metrics::srgb_squared_error(*c, *r)).collect()
 }
 
 /// Where `image` is wrong: the shares of the squared error in the worst 1 % of the pixels,

@@ -50,6 +50,13 @@ fn check_sizes(a: &[Vec3], b: &[Vec3]) {
     assert_eq!(a.len(), b.len(), "image metrics: images differ in size ({} vs {} pixels)", a.len(), b.len());
 }
 
+/// The squared difference of two linear colours after the sRGB transfer function, summed
+/// over the channels: one pixel's share of [`psnr`]'s squared error.
+#[inline]
+pub fn srgb_squared_error(x: Vec3, y: Vec3) -> f64 {
+    (0..3).map(|k| (linear_to_srgb(x[k]) as f64 - linear_to_srgb(y[k]) as f64).powi(2)).sum()
+}
+
 /// Peak signal-to-noise ratio in dB over all three channels, computed on **sRGB-encoded
 /// values in [0, 1]** (linear inputs are clamped to [0, 1] and encoded with the sRGB
 /// transfer function first, not quantised), peak value 1. Identical images (or two empty
@@ -68,10 +75,7 @@ pub fn psnr(a: &[Vec3], b: &[Vec3]) -> f64 {
         .map(|(ca, cb)| {
             let mut s = 0.0f64;
             for (x, y) in ca.iter().zip(cb) {
-                for k in 0..3 {
-                    let d = linear_to_srgb(x[k]) as f64 - linear_to_srgb(y[k]) as f64;
-                    s += d * d;
-                }
+                s += srgb_squared_error(*x, *y);
             }
             s
         })

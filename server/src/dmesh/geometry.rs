@@ -42,12 +42,7 @@ pub struct Geometry {
 impl Geometry {
     /// The scene's objects at their default transforms.
     pub fn from_scene(scene: &Scene) -> Geometry {
-        let objects: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = scene
-            .objects
-            .iter()
-            .map(|o| (o.mesh.positions.iter().map(|p| o.transform.transform_point3(*p).as_dvec3()).collect(), o.mesh.triangles.clone()))
-            .collect();
-        Geometry::from_objects(&objects)
+        Geometry::from_scene_at(scene, &[])
     }
 
     /// The scene's objects placed by `transforms` (one per object; an object without one

@@ -209,21 +209,21 @@ pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::P
 fn saturation(c: &[f32], s: f64) -> (f64, f64) {
     const LANES: usize = 8;
     let (mut sat, mut rest) = ([0u32; LANES], [0.0f64; LANES]);
-    let chunks = c.chunks_exact(LANES);
-    let tail = chunks.remainder();
-    for ch in chunks {
-        for k in 0..LANES {
-            let p = ch[k] as f64;
-            let full = p * s >= 1.0;
-            sat[k] += full as u32;
-            rest[k] += if full { 0.0 } else { p };
-        }
-    }
-    for (k, &p) in tail.iter().enumerate() {
+    let mut add = |k: usize, p: f32| {
         let p = p as f64;
         let full = p * s >= 1.0;
         sat[k] += full as u32;
         rest[k] += if full { 0.0 } else { p };
+    };
+    let chunks = c.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for ch in chunks {
+        for (k, &p) in ch.iter().enumerate() {
+            add(k, p);
+        }
+    }
+    for (k, &p) in tail.iter().enumerate() {
+        add(k, p);
     }
     (sat.iter().map(|&n| n as f64).sum(), rest.iter().sum())
 }
