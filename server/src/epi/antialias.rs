@@ -19,12 +19,26 @@
 //! alone (on `cornell` two such pixels held a third of the converged image's squared error).
 //! Without either, the pixel keeps its primary colour.
 //!
+//! The mix's areas are exact where the rasterizer recorded the crossings' fine positions
+//! ([`Boundaries::fine`]), not those of the quantised edge between the centres of the two
+//! crossed eighths (§4.2): on a long, nearly horizontal edge every pixel's crossings lie in
+//! the same eighths, so the quantised area is off by the same amount along the whole run
+//! (up to 1/16 of the pixel; the luminaire's upper edge on `cornell` held a quarter of the
+//! converged image's squared error). The edge is the line between the two exact crossings;
+//! in a pixel holding a segment end ([`Boundaries::holds_end`]) it is two lines meeting
+//! inside it, each continuing its neighbour's edge (the line from the shared crossing to the
+//! neighbour's other one, from a simple neighbour without a segment end), when they meet
+//! inside the pixel: a rectangle's corner, whose area the one line (a triangle) halves. Only
+//! the areas change: which neighbours give the secondary colour stays with the codes.
+//!
 //! The pass reads primary colours while it writes mixed ones, so the primary colours of
 //! simple pixels (the only ones it changes) are first copied into a compact array in scan
 //! order (a pixel's index is the number of simple pixels before it, from a count per
 //! 64-pixel word), the first step's secondary colours go into a second compact array, and a
 //! last pass, which also takes the second step, writes the mixes into the image: no
 //! full-size colour buffer, and no pixel is read after it changed.
+use super::code::{BOTTOM, PIXEL, RIGHT, TOP};
+use super::raster::{fine_fraction, Boundaries};
 use super::reach::{Neighbours, NB_PLANES};
 use super::tables::{tables, DIRS, DIR_DOWN, DIR_LEFT, DIR_RIGHT, DIR_UP, PS, SP, SS};
 use super::{EpiPixel, Flags};
@@ -113,8 +127,109 @@ impl SimpleColours {
     }
 }
 
+/// Where the crossing at perimeter index `e` of pixel (x, y) lies in its unit square, from
+/// the fine positions; `None` without them, or where the fine position is not in the
+/// crossing's eighth (which a simple pixel's crossings always are, being the only ones on
+/// their sides).
+#[inline]
+fn crossing(bounds: &Boundaries, x: usize, y: usize, e: u32) -> Option<[f32; 2]> {
+    let (side, pos) = (e / PIXEL.segments, e % PIXEL.segments);
+    let q = bounds.fine_at(x, y, side)?;
+    (q >> 13 == pos).then(|| {
+        let t = fine_fraction(q);
+        match side {
+            TOP => [t, 0.0],
+            RIGHT => [1.0, t],
+            BOTTOM => [t, 1.0],
+            _ => [0.0, t],
+        }
+    })
+}
+
+/// Perimeter side → the neighbour across it.
+const SIDE_DIR: [usize; 4] = [DIR_UP, DIR_RIGHT, DIR_DOWN, DIR_LEFT];
+
+/// `orient(p, q, r) > 0`: `r` on side A of the directed line `p → q` (as the tables'
+/// [`super::tables::orient`]).
+#[inline]
+fn orient(p: [f32; 2], q: [f32; 2], r: [f32; 2]) -> f32 {
+    (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+}
+
+/// Area of side A of the chord from `p` on side `sp` to `q` on side `sq > sp` of the unit
+/// square (closed form of [`super::tables::side_a_area`]): the polygon `p`, the corners
+/// passed going clockwise from `p`'s side to `q`'s (at least one, the sides differing), `q`.
+#[inline]
+fn chord_area_a(p: [f32; 2], sp: u32, q: [f32; 2], sq: u32) -> f32 {
+    // The corner at the end of each side, clockwise (top → right → bottom → left).
+    const CORNER: [[f32; 2]; 4] = [[1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]];
+    let cross = |u: [f32; 2], v: [f32; 2]| u[0] * v[1] - v[0] * u[1];
+    let mut twice = cross(q, p);
+    let mut last = p;
+    for c in &CORNER[sp as usize..sq as usize] {
+        twice += cross(last, *c);
+        last = *c;
+    }
+    twice += cross(last, q);
+    let area = 0.5 * twice.abs();
+    if orient(p, q, CORNER[sp as usize]) > 0.0 {
+        area
+    } else {
+        1.0 - area
+    }
+}
+
+/// Area of side A (as the code's tables orient it) of simple pixel (x, y)'s exact edge, from
+/// the fine positions of its crossings (see the module's comment); `None` without them.
+fn exact_area_a(bounds: &Boundaries, pixels: &[EpiPixel], x: usize, y: usize, code: u16) -> Option<f32> {
+    let (w, h) = (bounds.width, bounds.height);
+    let (a, b) = PIXEL.ends(code);
+    let (p, q) = (crossing(bounds, x, y, a)?, crossing(bounds, x, y, b)?);
+    let chord = chord_area_a(p, a / PIXEL.segments, q, b / PIXEL.segments);
+    if !bounds.holds_end(x, y) {
+        return Some(chord);
+    }
+    // The line continuing the neighbour's edge across the side of crossing `e` at `at`: a
+    // point of it beyond the side, in this pixel's coordinates.
+    let beyond = |e: u32, at: [f32; 2]| -> Option<[f32; 2]> {
+        let side = e / PIXEL.segments;
+        let (dx, dy) = DIRS[SIDE_DIR[side as usize]];
+        let (nx, ny) = (x as i64 + dx as i64, y as i64 + dy as i64);
+        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+            return None;
+        }
+        let (nx, ny) = (nx as usize, ny as usize);
+        let n = pixels[ny * w + nx];
+        if !n.is_simple() || bounds.holds_end(nx, ny) {
+            return None;
+        }
+        // The neighbour's end on the shared side is this crossing; its other end:
+        let (na, nb) = PIXEL.ends(n.code());
+        let shared = (side + 2) % 4;
+        let far = if na / PIXEL.segments == shared { nb } else { na };
+        let f = crossing(bounds, nx, ny, far)?;
+        let f = [f[0] + dx as f32, f[1] + dy as f32];
+        (f != at).then_some(f)
+    };
+    let (Some(fp), Some(fq)) = (beyond(a, p), beyond(b, q)) else { return Some(chord) };
+    // Where the line p–fp meets the line q–fq.
+    let (d1, d2) = ([p[0] - fp[0], p[1] - fp[1]], [q[0] - fq[0], q[1] - fq[1]]);
+    let det = d1[0] * d2[1] - d1[1] * d2[0];
+    if det.abs() <= 1e-6 * (d1[0].hypot(d1[1]) * d2[0].hypot(d2[1])) {
+        return Some(chord);
+    }
+    let s = ((q[0] - p[0]) * d2[1] - (q[1] - p[1]) * d2[0]) / det;
+    let corner = [p[0] + s * d1[0], p[1] + s * d1[1]];
+    if !(0.0..=1.0).contains(&corner[0]) || !(0.0..=1.0).contains(&corner[1]) {
+        return Some(chord);
+    }
+    // The outline p → corner → q bends into side A by the triangle (p, q, corner) where
+    // the corner lies on side A of p → q (orient > 0), and out of it otherwise.
+    Some((chord - 0.5 * orient(p, q, corner)).clamp(0.0, 1.0))
+}
+
 /// Anti-aliases the simple pixels of `image`; returns how many took a secondary colour.
-pub fn antialias(pixels: &[EpiPixel], flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3]) -> u32 {
+pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3]) -> u32 {
     let (w, h, words) = (flags.width, flags.height, flags.words);
     if w == 0 || h == 0 {
         return 0;
@@ -216,7 +331,7 @@ pub fn antialias(pixels: &[EpiPixel], flags: &Flags, filled: &[u64], nb: &Neighb
                 row[x] = if second.x.is_nan() {
                     own
                 } else {
-                    let area_a = t.pixel.area_a(p.code());
+                    let area_a = exact_area_a(bounds, pixels, x, y, p.code()).unwrap_or_else(|| t.pixel.area_a(p.code()));
                     let primary_area = if p.primary_b() { 1.0 - area_a } else { area_a };
                     mixed += 1;
                     own * primary_area + second * (1.0 - primary_area)

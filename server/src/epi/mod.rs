@@ -25,7 +25,8 @@
 //! networking.
 //!
 //! Per-pixel memory (bytes per pixel, see [`Epi::memory`] and the bench `epi`): boundary
-//! masks 2 (+2 with the complex filter's centre lines), conservative depth 4, EPI pixel 2
+//! masks 2 (+2 with the complex filter's centre lines), the crossings' fine positions 4 and
+//! segment-end bits 0.125 (for the anti-aliasing's exact areas), conservative depth 4, EPI pixel 2
 //! (edge code, sample region, flags), flag planes 0.5, interpolated and hole planes 0.25,
 //! neighbour masks 1, reachability 1.5; plus 24 bytes per simple pixel for anti-aliasing and
 //! the spreading queues, which scale with the edges and the unreached pixels.
@@ -232,12 +233,16 @@ impl Epi {
         })
     }
 
-    /// Replaces the boundary masks (tests build EPIs from 2D geometry) and classifies.
+    /// Replaces the boundary masks (tests build EPIs from 2D geometry) and classifies; with
+    /// `fine` empty the anti-aliasing uses the quantised edges' areas.
     #[cfg(test)]
-    pub(crate) fn classify_with(&mut self, sides: Vec<u16>, centres: Vec<u16>, points: &PointImage) -> EpiCounts {
+    pub(crate) fn classify_with(&mut self, sides: Vec<u16>, centres: Vec<u16>, fine: testutil::Fine, points: &PointImage) -> EpiCounts {
         assert_eq!(sides.len(), (self.width + 1) * (self.height + 1));
         self.bounds.sides = sides;
         self.bounds.centres = centres;
+        assert!(fine.positions.is_empty() || fine.positions.len() == self.bounds.sides.len());
+        self.bounds.fine = fine.positions;
+        self.bounds.ends = fine.ends;
         self.counts = self.classify(points);
         self.counts
     }
@@ -312,7 +317,7 @@ impl Epi {
         });
         let spread = times.time(STAGE_SPREAD, || self.spread.run(&self.neighbours, &mut self.filled, &mut self.holes, image));
         let antialiased = times.time(STAGE_ANTIALIAS, || {
-            antialias::antialias(&self.pixels, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image)
+            antialias::antialias(&self.pixels, &self.bounds, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image)
         });
         let mut complex_refined = 0;
         if complex_filter && !self.bounds.centres.is_empty() {
@@ -363,6 +368,8 @@ impl Epi {
         vec![
             ("boundary masks (sides)", 2 * self.bounds.sides.len()),
             ("boundary masks (centre lines)", 2 * self.bounds.centres.len()),
+            ("crossing positions (anti-aliasing)", 4 * self.bounds.fine.len()),
+            ("segment-end bits (anti-aliasing)", 8 * self.bounds.ends.len()),
             ("conservative depth", self.depth.bytes()),
             ("EPI pixels (edge code, sample region, flags)", 2 * self.pixels.len()),
             ("flag planes", self.flags.bytes()),

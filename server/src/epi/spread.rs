@@ -196,7 +196,7 @@ impl BaselineHoles {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::epi::testutil::{draw_segment, random_points, Rng};
+    use crate::epi::testutil::{draw_segment, random_points, Fine, Rng};
     use crate::epi::Epi;
 
     #[test]
@@ -213,9 +213,9 @@ mod tests {
             points.depth[i] = 1.0;
         }
         let mut sides = vec![0u16; (w + 1) * (h + 1)];
-        draw_segment(w, h, &mut sides, &mut [], [10.5, -1.0], [10.5, 10.0]);
+        draw_segment(w, h, &mut sides, &mut [], &mut Fine::default(), [10.5, -1.0], [10.5, 10.0]);
         let mut epi = Epi::new(w as u32, h as u32);
-        epi.classify_with(sides, Vec::new(), &points);
+        epi.classify_with(sides, Vec::new(), Fine::default(), &points);
         let options = crate::epi::InterpOptions { fallback: false, ..Default::default() };
         let (mut image, mut weights) = (vec![Vec3::ZERO; w * h], vec![0.0; w * h]);
         let mut times = crate::stage_times::StageTimes::new();

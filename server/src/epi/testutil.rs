@@ -3,6 +3,7 @@
 
 pub use crate::rng::Rng;
 
+use super::raster::fine_position;
 use super::Epi;
 use crate::render_cache::{PointImage, NO_POINT};
 use glam::Vec3;
@@ -12,9 +13,31 @@ fn eighth(f: f64) -> u32 {
     ((f * 8.0) as u32).min(7)
 }
 
+/// The crossings' fine positions and the segment-end bits of
+/// [`super::raster::Boundaries`], or none (empty: the anti-aliasing uses quantised areas).
+#[derive(Default)]
+pub struct Fine {
+    pub positions: Vec<u32>,
+    pub ends: Vec<u64>,
+}
+
+impl Fine {
+    pub fn new(w: usize, h: usize) -> Self {
+        Fine { positions: vec![0; (w + 1) * (h + 1)], ends: vec![0; h * w.div_ceil(64)] }
+    }
+}
+
 /// Records the crossings of the 2D segment `a`-`b` (pixel coordinates) with the boundary
-/// lines of a `w` x `h` image (and the centre lines when `centres` is not empty).
-pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], a: [f64; 2], b: [f64; 2]) {
+/// lines of a `w` x `h` image (and the centre lines when `centres` is not empty), and their
+/// fine positions and the segment's ends when `fine` has them, as the rasterizer does.
+pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], fine: &mut Fine, a: [f64; 2], b: [f64; 2]) {
+    if !fine.ends.is_empty() {
+        for [x, y] in [a, b] {
+            if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
+                fine.ends[y as usize * w.div_ceil(64) + x as usize / 64] |= 1 << (x as usize % 64);
+            }
+        }
+    }
     let d = [b[0] - a[0], b[1] - a[1]];
     for (offset, centre) in [(0.0, false), (0.5, true)] {
         if centre && centres.is_empty() {
@@ -39,6 +62,11 @@ pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], 
                         centres[row * w + col] |= bit;
                     } else {
                         sides[row * (w + 1) + col] |= bit;
+                        if let Some(f) = fine.positions.get_mut(row * (w + 1) + col) {
+                            let fq = fine_position(q - qq);
+                            assert_eq!(fq >> 13, eighth(q - qq));
+                            *f = if axis == 0 { (*f & 0xFFFF_0000) | fq } else { (*f & 0xFFFF) | fq << 16 };
+                        }
                     }
                 }
             }
@@ -67,6 +95,7 @@ pub fn random_epi(points: &PointImage, long: usize, short: usize, centre_lines: 
     let (w, h) = (points.width as usize, points.height as usize);
     let mut sides = vec![0u16; (w + 1) * (h + 1)];
     let mut centres = if centre_lines { vec![0u16; w * h] } else { Vec::new() };
+    let mut fine = Fine::new(w, h);
     let (wf, hf) = (w as f64, h as f64);
     for k in 0..long + short {
         let a = [rng.f64() * (wf + 4.0) - 2.0, rng.f64() * (hf + 4.0) - 2.0];
@@ -75,10 +104,10 @@ pub fn random_epi(points: &PointImage, long: usize, short: usize, centre_lines: 
         } else {
             [a[0] + rng.f64() * 6.0 - 3.0, a[1] + rng.f64() * 6.0 - 3.0]
         };
-        draw_segment(w, h, &mut sides, &mut centres, a, b);
+        draw_segment(w, h, &mut sides, &mut centres, &mut fine, a, b);
     }
     let mut epi = Epi::new(w as u32, h as u32);
-    epi.classify_with(sides, centres, points);
+    epi.classify_with(sides, centres, fine, points);
     epi
 }
 

@@ -1,11 +1,13 @@
 //! Anti-aliasing against closed forms: images of two constant colours split by straight
 //! edges (a line across the image, a rectangle), sampled at every pixel, reconstructed by
-//! the whole pipeline. A simple pixel must show the area-weighted mix of the two colours
-//! with the quantised edge's areas — its secondary colour found — and so lie within the
-//! 1/8-pixel crossing quantisation of the exact box-filtered mean.
+//! the whole pipeline. With the crossings' fine positions (as the rasterizer records them) a
+//! simple pixel must show the exact box-filtered mean — the area-weighted mix of the two
+//! colours with the real edge's areas, corners of rectangles included — within the fine
+//! positions' rounding (2^-17 of a pixel); without them (masks from elsewhere), the mix with
+//! the quantised edge's areas, within the 1/8-pixel crossing quantisation of that mean.
 use crate::epi::code::{Cell, PIXEL};
 use crate::epi::tables::{orient, side_a_area};
-use crate::epi::testutil::{draw_segment, Rng};
+use crate::epi::testutil::{draw_segment, Fine, Rng};
 use crate::epi::{Epi, InterpOptions};
 use crate::render_cache::{PointImage, NO_POINT};
 use crate::stage_times::StageTimes;
@@ -27,14 +29,16 @@ fn points_coloured(w: usize, h: usize, rng: &mut Rng, colour_at: impl Fn([f64; 2
     pi
 }
 
-/// Builds the EPI of `segments` over `points` and reconstructs it (no complex filter).
-fn reconstruct(w: usize, h: usize, segments: &[([f64; 2], [f64; 2])], points: &PointImage) -> (Epi, Vec<Vec3>, u32) {
+/// Builds the EPI of `segments` over `points`, with the crossings' fine positions when
+/// `exact`, and reconstructs it (no complex filter).
+fn reconstruct(w: usize, h: usize, segments: &[([f64; 2], [f64; 2])], points: &PointImage, exact: bool) -> (Epi, Vec<Vec3>, u32) {
     let mut sides = vec![0u16; (w + 1) * (h + 1)];
+    let mut fine = if exact { Fine::new(w, h) } else { Fine::default() };
     for &(a, b) in segments {
-        draw_segment(w, h, &mut sides, &mut [], a, b);
+        draw_segment(w, h, &mut sides, &mut [], &mut fine, a, b);
     }
     let mut epi = Epi::new(w as u32, h as u32);
-    epi.classify_with(sides, Vec::new(), points);
+    epi.classify_with(sides, Vec::new(), fine, points);
     let (mut image, mut weights) = (vec![Vec3::ZERO; w * h], vec![0.0; w * h]);
     let rec = epi.reconstruct(points, Vec3::ZERO, &InterpOptions::default(), false, &mut image, &mut weights, &mut StageTimes::new());
     (epi, image, rec.antialiased)
@@ -73,6 +77,8 @@ struct Simple {
     y: usize,
     at: String,
     got: Vec3,
+    /// The mix with the quantised edge's areas.
+    quantised: Vec3,
     area_a: f64,
     extremes: [f64; 4],
 }
@@ -88,11 +94,31 @@ impl Simple {
         let bound = (inside - outside).abs() * quantisation + Vec3::splat(1e-4);
         assert!((self.got - exact_mean).abs().cmple(bound).all(), "{}: {} against the exact mean {exact_mean}, quantisation {quantisation}", self.at, self.got);
     }
+
+    /// Checks the pixel against the same exact mean within the fine positions' rounding: each
+    /// crossing within 2^-17 of a pixel of its real position moves the area by less than
+    /// 2^-16 (its segment of the outline is at most √2 long) — and f32 rounding.
+    fn assert_exact(&self, exact: f32, inside: Vec3, outside: Vec3) {
+        let exact_mean = inside * exact + outside * (1.0 - exact);
+        let bound = (inside - outside).abs() * 2.0f32.powi(-15) + Vec3::splat(1e-6) * exact_mean.abs().max_element().max(1.0);
+        assert!((self.got - exact_mean).abs().cmple(bound).all(), "{}: {} against the exact mean {exact_mean} (coverage {exact}; quantised edge's {})", self.at, self.got, self.area_a);
+    }
+
+    /// [`Self::assert_exact`] with the fine positions, [`Self::assert_within_quantisation`]
+    /// without.
+    fn assert_mean(&self, exact_mode: bool, exact: f32, inside: Vec3, outside: Vec3) {
+        if exact_mode {
+            self.assert_exact(exact, inside, outside);
+        } else {
+            self.assert_within_quantisation(exact, inside, outside);
+        }
+    }
 }
 
-/// The simple pixels of a two-colour reconstruction, each checked to show the mix of both
-/// colours with its quantised edge's areas (its secondary colour found).
-fn simple_pixels(epi: &Epi, image: &[Vec3], trial: usize, colour_at: &impl Fn([f64; 2]) -> Vec3) -> Vec<Simple> {
+/// The simple pixels of a two-colour reconstruction; without fine positions (`exact`
+/// false) each checked to show the mix of both colours with its quantised edge's areas (its
+/// secondary colour found).
+fn simple_pixels(epi: &Epi, image: &[Vec3], trial: usize, colour_at: &impl Fn([f64; 2]) -> Vec3, exact: bool) -> Vec<Simple> {
     let w = epi.width() as usize;
     let mut out = Vec::new();
     for (i, px) in epi.pixels().iter().enumerate() {
@@ -100,49 +126,61 @@ fn simple_pixels(epi: &Epi, image: &[Vec3], trial: usize, colour_at: &impl Fn([f
             continue;
         }
         let (x, y) = (i % w, i / w);
-        let at = format!("trial {trial}, pixel ({x},{y}), code {}", px.code());
+        let at = format!("trial {trial}{}, pixel ({x},{y}), code {}", if exact { " (fine positions)" } else { "" }, px.code());
         let (ca, cb, area_a, extremes) = sides_of(PIXEL, px.code(), x, y, colour_at);
         assert_ne!(ca, cb, "{at}: the edge splits the pixel");
         let (got, want) = (image[i], ca * area_a as f32 + cb * (1.0 - area_a as f32));
-        assert!((got - want).abs().max_element() <= 1e-5 * want.abs().max_element().max(1.0), "{at}: {got} against {want}");
-        out.push(Simple { x, y, at, got, area_a, extremes });
+        assert!(exact || (got - want).abs().max_element() <= 1e-5 * want.abs().max_element().max(1.0), "{at}: {got} against {want}");
+        out.push(Simple { x, y, at, got, quantised: want, area_a, extremes });
     }
     out
 }
 
 #[test]
-fn a_pixel_on_a_straight_edge_is_the_area_weighted_mean_within_the_crossing_quantisation() {
+fn a_pixel_on_a_straight_edge_is_the_exact_area_weighted_mean() {
     let (w, h) = (48, 40);
     let (inside, outside) = (Vec3::new(17.0, 12.0, 4.0), Vec3::splat(0.02));
     let mut rng = Rng(7);
-    for trial in 0..24 {
-        // A line across the whole image, at any angle; `inside` on its side A.
-        let angle = rng.f64() * std::f64::consts::PI;
+    for trial in 0..36 {
+        // A line across the whole image, at any angle; `inside` on its side A. The last
+        // third nearly horizontal or vertical (cornell's luminaire and boxes), whose
+        // crossings keep one eighth along a run of pixels.
+        let angle = if trial < 24 { rng.f64() * std::f64::consts::PI } else { (rng.f64() - 0.5) * 0.02 + (trial % 2) as f64 * std::f64::consts::FRAC_PI_2 };
         let centre = [8.0 + rng.f64() * (w as f64 - 16.0), 8.0 + rng.f64() * (h as f64 - 16.0)];
         let (dx, dy) = (angle.cos() * 100.0, angle.sin() * 100.0);
         let (p0, p1) = ([centre[0] - dx, centre[1] - dy], [centre[0] + dx, centre[1] + dy]);
         let colour_at = |r: [f64; 2]| if orient(p0, p1, r) > 0.0 { inside } else { outside };
         let points = points_coloured(w, h, &mut rng, colour_at, |_, _| false);
-        let (epi, image, antialiased) = reconstruct(w, h, &[(p0, p1)], &points);
-        let simple = simple_pixels(&epi, &image, trial, &colour_at);
-        for px in &simple {
-            // The pixel's exact area on the line's `inside` side.
-            let local = |r: [f64; 2]| [r[0] - px.x as f64, r[1] - px.y as f64];
-            px.assert_within_quantisation(side_a_area(local(p0), local(p1)) as f32, inside, outside);
+        // With the fine positions, and without them (within the quantisation).
+        for exact in [true, false] {
+            let (epi, image, antialiased) = reconstruct(w, h, &[(p0, p1)], &points, exact);
+            let simple = simple_pixels(&epi, &image, trial, &colour_at, exact);
+            for px in &simple {
+                // The pixel's exact area on the line's `inside` side.
+                let local = |r: [f64; 2]| [r[0] - px.x as f64, r[1] - px.y as f64];
+                px.assert_mean(exact, side_a_area(local(p0), local(p1)) as f32, inside, outside);
+            }
+            if exact {
+                // The fine positions matter: somewhere the quantised edge's mix is off by 100 times
+                // the bound.
+                let off = simple.iter().map(|px| (px.got - px.quantised).abs().max_element()).fold(0.0, f32::max);
+                assert!(off > 0.05, "trial {trial}: {off}");
+            }
+            assert!(simple.len() >= w.min(h), "trial {trial}: {} simple pixels", simple.len());
+            assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
         }
-        assert!(simple.len() >= w.min(h), "trial {trial}: {} simple pixels", simple.len());
-        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
     }
 }
 
 #[test]
-fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_secondary_colour() {
+fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_secondary_colour_and_its_exact_area() {
     // The luminaire in the ceiling: a bright rectangle whose corners lie inside pixels (at
     // 0.2–0.8 of them). A corner pixel's crossings are on two adjacent sides (a simple pixel
     // whose quantised edge cuts the corner off as a triangle); no neighbour's centre lies in
     // that triangle, and where the rectangle holds less than half of the pixels beside the
     // corner (a quarter of the corners), their larger, primary region is outside, so only
-    // their secondary regions continue it.
+    // their secondary regions continue it. With the fine positions and the segments' ends,
+    // the corner pixel's outline is the two sides meeting inside it, and its mix exact.
     let (w, h) = (40, 32);
     let (inside, outside) = (Vec3::new(17.0, 12.0, 4.0), Vec3::splat(0.02));
     let mut rng = Rng(11);
@@ -161,20 +199,48 @@ fn a_pixel_holding_the_corner_of_a_bright_rectangle_takes_the_rectangle_as_its_s
         let corner = |x: usize, y: usize| [x0, x1].iter().any(|&cx| cx.floor() as usize == x) && [y0, y1].iter().any(|&cy| cy.floor() as usize == y);
         let points = points_coloured(w, h, &mut rng, colour_at, corner);
         let segments = [([x0, y0], [x1, y0]), ([x1, y0], [x1, y1]), ([x1, y1], [x0, y1]), ([x0, y1], [x0, y0])];
-        let (epi, image, antialiased) = reconstruct(w, h, &segments, &points);
-        let simple = simple_pixels(&epi, &image, trial, &colour_at);
-        for px in &simple {
-            if corner(px.x, px.y) {
-                // The quantised edge cuts a triangle where the rectangle's corner is: the mean
-                // is not within the quantisation there, but both colours are in it.
-                corners_seen += 1;
-                assert!((px.got - outside).max_element() > 0.1 && (inside - px.got).min_element() > 0.1, "{}: {}", px.at, px.got);
-            } else {
-                let overlap = |lo: f64, hi: f64, p: usize| (hi.min(p as f64 + 1.0) - lo.max(p as f64)).max(0.0);
-                px.assert_within_quantisation((overlap(x0, x1, px.x) * overlap(y0, y1, px.y)) as f32, inside, outside);
+        let overlap = |lo: f64, hi: f64, p: usize| (hi.min(p as f64 + 1.0) - lo.max(p as f64)).max(0.0);
+        for exact in [true, false] {
+            let (epi, image, antialiased) = reconstruct(w, h, &segments, &points, exact);
+            let simple = simple_pixels(&epi, &image, trial, &colour_at, exact);
+            for px in &simple {
+                let area = (overlap(x0, x1, px.x) * overlap(y0, y1, px.y)) as f32;
+                if exact {
+                    // Corners too: the two sides meet inside the pixel.
+                    corners_seen += usize::from(corner(px.x, px.y));
+                    px.assert_exact(area, inside, outside);
+                } else if corner(px.x, px.y) {
+                    // The quantised edge cuts a triangle where the rectangle's corner is: the
+                    // mean is not within the quantisation there, but both colours are in it.
+                    corners_seen += 1;
+                    assert!((px.got - outside).max_element() > 0.1 && (inside - px.got).min_element() > 0.1, "{}: {}", px.at, px.got);
+                } else {
+                    px.assert_within_quantisation(area, inside, outside);
+                }
             }
+            assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
         }
-        assert_eq!(antialiased as usize, simple.len(), "trial {trial}: every simple pixel took a secondary colour");
     }
-    assert!(corners_seen >= 32 * 3, "{corners_seen} simple corner pixels");
+    assert!(corners_seen >= 2 * 32 * 3, "{corners_seen} simple corner pixels");
+}
+
+#[test]
+fn the_closed_form_chord_area_equals_the_clipped_polygon() {
+    let mut rng = Rng(3);
+    let at = |side: u32, t: f32| match side {
+        0 => [t, 0.0],
+        1 => [1.0, t],
+        2 => [t, 1.0],
+        _ => [0.0, t],
+    };
+    for _ in 0..10_000 {
+        let (sp, sq) = (rng.below(4) as u32, rng.below(4) as u32);
+        if sp >= sq {
+            continue;
+        }
+        let (p, q) = (at(sp, rng.unit()), at(sq, rng.unit()));
+        let want = side_a_area([p[0] as f64, p[1] as f64], [q[0] as f64, q[1] as f64]);
+        let got = super::chord_area_a(p, sp, q, sq);
+        assert!((got as f64 - want).abs() < 1e-6, "{p:?} on {sp}, {q:?} on {sq}: {got} against {want}");
+    }
 }

@@ -1,7 +1,7 @@
 //! The complex filter: subpixel reachability against a flood fill over subpixel regions,
 //! and reconstruction of a pixel where two edges cross.
 use super::*;
-use crate::epi::testutil::{draw_segment, monotone_paths, random_epi, random_points, regions_meeting, Rng};
+use crate::epi::testutil::{draw_segment, monotone_paths, Fine, random_epi, random_points, regions_meeting, Rng};
 use crate::epi::Epi;
 use std::collections::{HashSet, VecDeque};
 
@@ -121,10 +121,10 @@ fn two_crossing_edges_are_reconstructed_better_than_by_plain_interpolation() {
     let mut sides = vec![0u16; (w + 1) * (h + 1)];
     let mut centres = vec![0u16; w * h];
     for (a, b) in lines {
-        draw_segment(w, h, &mut sides, &mut centres, a, b);
+        draw_segment(w, h, &mut sides, &mut centres, &mut Fine::default(), a, b);
     }
     let mut epi = Epi::new(w as u32, h as u32);
-    epi.classify_with(sides, centres, &points);
+    epi.classify_with(sides, centres, Fine::default(), &points);
     let c = (5usize, 5usize);
     assert!(epi.pixels()[c.1 * w + c.0].is_complex());
     // The exact pixel colour: sector areas by fine sampling.
@@ -193,10 +193,10 @@ fn parallel_edges_at(row: usize, beyond: bool, lines: [(f64, f64); 2], colours: 
     let mut sides = vec![0u16; (w + 1) * (h + 1)];
     let mut centres = vec![0u16; w * h];
     for (a, b) in lines {
-        draw_segment(w, h, &mut sides, &mut centres, flip(a), flip(b));
+        draw_segment(w, h, &mut sides, &mut centres, &mut Fine::default(), flip(a), flip(b));
     }
     let mut epi = Epi::new(w as u32, h as u32);
-    epi.classify_with(sides, centres, &points);
+    epi.classify_with(sides, centres, Fine::default(), &points);
     let mut times = crate::stage_times::StageTimes::new();
     let (mut image, mut wts) = (vec![Vec3::ZERO; w * h], vec![0.0; w * h]);
     epi.reconstruct(&points, Vec3::ZERO, &crate::epi::InterpOptions::default(), true, &mut image, &mut wts, &mut times);

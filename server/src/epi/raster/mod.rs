@@ -5,13 +5,20 @@
 //! With the complex filter on (§5.4) the crossings with the two centre lines of each pixel
 //! (`x = X + 1/2`, `y = Y + 1/2`) are recorded as well.
 //!
+//! Beside the masks, each pixel side keeps the position of its last recorded crossing at
+//! 1/65536 of the side ([`Boundaries::fine`]; its top three bits are the crossing's eighth):
+//! classification and reachability use only the eighths (§4.2), the anti-aliasing of
+//! simple pixels (§5.3) the exact positions, since on a long, nearly horizontal edge the
+//! eighth is the same along a whole run of pixels and the error of its area does not
+//! average out.
+//!
 //! A crossing whose depth (perspective-correct: inverse depth is linear along the projected
 //! segment) lies behind the conservative depth buffer ([`super::depth`]) at the nearest
 //! pixel corner is dropped: occlusion culling.
 //!
 //! Work is split into bands of rows; each segment is binned into the bands its projection
 //! spans, and each band writes only its own rows, so bands run in parallel without locks.
-use super::code::pixel_mask;
+use super::code::{pixel_mask, BOTTOM, RIGHT, TOP};
 use super::depth::ConservativeDepth;
 use crate::edges::EdgeSegment;
 use edgepoint_scene::camera::CameraFrame;
@@ -35,21 +42,69 @@ pub struct Boundaries {
     /// vertical centre line `x + 1/2` within `[y, y + 1)`, high byte the horizontal one
     /// `y + 1/2` within `[x, x + 1)`.
     pub centres: Vec<u16>,
+    /// Parallel to `sides`: the low half the position along the left side of its last
+    /// recorded crossing, the high half along the top side, in 1/65536 of the side (see
+    /// [`fine_position`]); meaningful only where the side's mask has a bit, whose eighth is
+    /// the position's top three bits. Never cleared (written with every bit). Empty when
+    /// the masks came from elsewhere (tests): the anti-aliasing then uses the eighths.
+    pub fine: Vec<u32>,
+    /// Bit rows (`ceil(width / 64)` words per row): the pixels holding a visible end of a
+    /// segment — where an outline may turn (a rectangle's corner), so that the crossings of
+    /// a simple pixel need not lie on one line. Empty with `fine`.
+    pub ends: Vec<u64>,
+}
+
+/// A crossing at `f` ∈ [0, 1) along a side, in 1/65536 of the side: its eighth (paper 000
+/// §4.2) is `q >> 13` (the same as `floor(8 f)`: both scalings are exact), and
+/// `(q + 1/2) / 65536` is within 2^-17 of `f` — a quarter of the spacing of f32 pixel
+/// coordinates between 256 and 512.
+#[inline]
+pub fn fine_position(f: f64) -> u32 {
+    ((f * 65536.0) as u32).min(65535)
+}
+
+/// The side position `q` of [`fine_position`] as a fraction of the side.
+#[inline]
+pub fn fine_fraction(q: u32) -> f32 {
+    (q as f32 + 0.5) * (1.0 / 65536.0)
 }
 
 impl Boundaries {
     /// Bytes of the masks of a `width` × `height` image, with the centre lines the complex
-    /// filter adds ([`crate::epi::Epi::build`] allocates them on its first frame with it).
+    /// filter adds ([`crate::epi::Epi::build`] allocates them on its first frame with it),
+    /// the crossings' fine positions (4 bytes per grid vertex) and the segment-end bits.
     pub fn bytes_for(width: usize, height: usize) -> usize {
-        2 * (width + 1) * (height + 1) + 2 * width * height
+        (2 + 4) * (width + 1) * (height + 1) + 2 * width * height + 8 * height * width.div_ceil(64)
     }
 
     pub fn new(width: usize, height: usize) -> Self {
-        Boundaries { width, height, sides: vec![0; (width + 1) * (height + 1)], centres: Vec::new() }
+        let n = (width + 1) * (height + 1);
+        Boundaries { width, height, sides: vec![0; n], centres: Vec::new(), fine: vec![0; n], ends: vec![0; height * width.div_ceil(64)] }
     }
 
     pub fn bytes(&self) -> usize {
-        2 * (self.sides.len() + self.centres.len())
+        2 * (self.sides.len() + self.centres.len()) + 4 * self.fine.len() + 8 * self.ends.len()
+    }
+
+    /// Whether pixel (x, y) holds a visible segment end (false without fine positions).
+    #[inline]
+    pub fn holds_end(&self, x: usize, y: usize) -> bool {
+        self.ends.get(y * self.width.div_ceil(64) + x / 64).is_some_and(|&word| (word >> (x % 64)) & 1 == 1)
+    }
+
+    /// The fine position (see [`fine_position`]) of the crossing of pixel (x, y)'s side
+    /// (`code::TOP` … `code::LEFT`), if the boundaries have fine positions.
+    #[inline]
+    pub fn fine_at(&self, x: usize, y: usize, side: u32) -> Option<u32> {
+        let stride = self.width + 1;
+        let (vx, vy, high) = match side {
+            TOP => (x, y, true),
+            RIGHT => (x + 1, y, false),
+            BOTTOM => (x, y + 1, true),
+            _ => (x, y, false),
+        };
+        let f = *self.fine.get(vy * stride + vx)?;
+        Some(if high { f >> 16 } else { f & 0xFFFF })
     }
 
     #[inline]
@@ -228,6 +283,11 @@ impl Rasterizer {
         let mut counts = RasterCounts { segments: edges.len() as u32, ..Default::default() };
         out.sides.par_iter_mut().for_each(|s| *s = 0);
         out.centres.par_iter_mut().for_each(|s| *s = 0);
+        // (Allocated after masks from elsewhere; never cleared otherwise.)
+        out.fine.resize(out.sides.len(), 0);
+        let words = w.div_ceil(64);
+        out.ends.clear();
+        out.ends.resize(h * words, 0);
         if w == 0 || h == 0 {
             return counts;
         }
@@ -256,17 +316,20 @@ impl Rasterizer {
         } else {
             (0..bands).map(|_| &mut [][..]).collect()
         };
+        // (The last band holds only boundary row `h` when `h` is a multiple of the band.)
+        let end_chunks: Vec<&mut [u64]> = out.ends.chunks_mut(BAND_ROWS * words).chain(std::iter::repeat_with(|| &mut [][..])).take(bands).collect();
         let (segs, bins) = (&self.segments, &self.bins);
         let band_counts = out
             .sides
             .par_chunks_mut(BAND_ROWS * (w + 1))
-            .zip(centre_chunks.into_par_iter())
+            .zip(out.fine.par_chunks_mut(BAND_ROWS * (w + 1)))
+            .zip(centre_chunks.into_par_iter().zip(end_chunks.into_par_iter()))
             .enumerate()
-            .map(|(b, (sides, centres))| {
+            .map(|(b, ((sides, fine), (centres, ends)))| {
                 let band = Band { y_lo: b * BAND_ROWS, y_hi: (b + 1) * BAND_ROWS, w, h, depth, with_centres };
                 let mut c = RasterCounts::default();
                 for &i in &bins[b] {
-                    band.segment(&segs[i as usize], sides, centres, &mut c);
+                    band.segment(&segs[i as usize], BandOut { sides, fine, centres, ends }, &mut c);
                 }
                 c
             })
@@ -295,6 +358,14 @@ struct Band<'a> {
     with_centres: bool,
 }
 
+/// A band's rows of [`Boundaries`]' buffers.
+struct BandOut<'a> {
+    sides: &'a mut [u16],
+    fine: &'a mut [u32],
+    centres: &'a mut [u16],
+    ends: &'a mut [u64],
+}
+
 /// Eighth of the unit interval holding `f` in [0, 1).
 #[inline]
 fn eighth(f: f64) -> u32 {
@@ -303,7 +374,8 @@ fn eighth(f: f64) -> u32 {
 
 impl Band<'_> {
     /// Records the crossings of `s` with the lines of this band.
-    fn segment(&self, s: &ScreenSegment, sides: &mut [u16], centres: &mut [u16], c: &mut RasterCounts) {
+    fn segment(&self, s: &ScreenSegment, out: BandOut, c: &mut RasterCounts) {
+        let BandOut { sides, fine, centres, ends } = out;
         let (w, h) = (self.w, self.h);
         let (dx, dy) = (s.x1 - s.x0, s.y1 - s.y0);
         let (ylo, yhi) = (self.y_lo as f64, self.y_hi as f64);
@@ -330,6 +402,13 @@ impl Band<'_> {
             // Behind the conservative depth: 1/z < 1/d.
             z_inv * (d as f64) < 1.0
         };
+        // The segment's ends in this band's pixel rows, unless behind the conservative depth.
+        for (t, x, y) in [(0.0, s.x0, s.y0), (1.0, s.x1, s.y1)] {
+            if y >= ylo && y < yhi && y >= 0.0 && y < h as f64 && x >= 0.0 && x < w as f64 && !culled(inv_depth(t), x, y, false) {
+                let (px, row) = (x as usize, y as usize - self.y_lo);
+                ends[row * w.div_ceil(64) + px / 64] |= 1 << (px % 64);
+            }
+        }
         // The x range of the band's part, widened by rounding: ownership of a crossing is
         // decided by its own y below, computed the same way in every band.
         let (xa, xb) = (s.x0 + tlo * dx, s.x0 + thi * dx);
@@ -357,11 +436,12 @@ impl Band<'_> {
                     }
                     let yy = y.floor();
                     let row = yy as usize - self.y_lo;
-                    let bit = 1u16 << eighth(y - yy);
                     if centre {
-                        centres[row * w + xl as usize] |= bit;
+                        centres[row * w + xl as usize] |= 1u16 << eighth(y - yy);
                     } else {
-                        sides[row * (w + 1) + xl as usize] |= bit;
+                        let (i, q) = (row * (w + 1) + xl as usize, fine_position(y - yy));
+                        sides[i] |= 1u16 << (q >> 13);
+                        fine[i] = (fine[i] & 0xFFFF_0000) | q;
                     }
                     c.fragments += 1;
                 }
@@ -384,19 +464,20 @@ impl Band<'_> {
                         continue;
                     }
                     let xx = x.floor();
-                    let bit = 1u16 << (8 + eighth(x - xx));
                     if offset == 0.0 {
                         if culled(inv_depth(t), x, yl as f64, false) {
                             c.culled += 1;
                             continue;
                         }
-                        sides[(yl as usize - self.y_lo) * (w + 1) + xx as usize] |= bit;
+                        let (i, q) = ((yl as usize - self.y_lo) * (w + 1) + xx as usize, fine_position(x - xx));
+                        sides[i] |= 1u16 << (8 + (q >> 13));
+                        fine[i] = (fine[i] & 0xFFFF) | q << 16;
                     } else {
                         if culled(inv_depth(t), x, yl as f64 + 0.5, false) {
                             c.culled += 1;
                             continue;
                         }
-                        centres[(yl as usize - self.y_lo) * w + xx as usize] |= bit;
+                        centres[(yl as usize - self.y_lo) * w + xx as usize] |= 1u16 << (8 + eighth(x - xx));
                     }
                     c.fragments += 1;
                 }
