@@ -188,3 +188,52 @@ fn a_long_straight_edge_makes_a_chain_of_simple_pixels() {
     assert!(complex <= 2, "{complex} complex pixels");
     let _ = Cell { segments: 8, regions: 4 };
 }
+
+#[test]
+fn fine_positions_are_the_crossings_and_end_bits_the_pixels_holding_segment_ends() {
+    let (w, h) = (40, 30);
+    let cam = camera(w, h);
+    let depth = ConservativeDepth::new(w, h);
+    let prj = SegmentProjector::new(&cam, w, h);
+    let mut rng = Rng(5);
+    let at = |sx: f32, sy: f32, z: f32| {
+        let (o, d) = cam.ray(sx, sy);
+        o + d * z
+    };
+    let (mut checked, mut ends_seen) = (0, 0);
+    for trial in 0..60 {
+        // One segment at a time (a side holds at most one crossing), ends on and off screen.
+        let mut end = || at(rng.range(-10.0, w as f32 + 10.0), rng.range(-10.0, h as f32 + 10.0), rng.range(2.0, 6.0));
+        let e = EdgeSegment { a: end(), b: end(), kind: EdgeKind::Sharp, object: 1 };
+        let mut out = Boundaries::new(w, h);
+        Rasterizer::new().rasterize(&[e], &cam, &depth, &mut out);
+        for y in 0..=h {
+            for x in 0..=w {
+                let (v, f) = (out.sides[y * (w + 1) + x], out.fine[y * (w + 1) + x]);
+                // (vertical line x: position along y; horizontal line y: along x)
+                for (vertical, bits, q, line, cell) in [(true, v & 0xFF, f & 0xFFFF, x, y), (false, v >> 8, f >> 16, y, x)] {
+                    if bits == 0 {
+                        continue;
+                    }
+                    assert_eq!(bits.count_ones(), 1, "trial {trial}: ({x}, {y})");
+                    assert_eq!(q >> 13, u32::from(bits.trailing_zeros()), "trial {trial}: ({x}, {y}) the fine position in the bit's eighth");
+                    let (pos, _) = cross(&cam, w, h, &e, vertical, line as f64).expect("a recorded crossing is a crossing");
+                    let exact = pos - cell as f64;
+                    assert!((fine_fraction(q) as f64 - exact).abs() <= 2f64.powi(-17) + 1e-6, "trial {trial}: ({x}, {y}) vertical {vertical}: {} against {exact}", fine_fraction(q));
+                    checked += 1;
+                }
+            }
+        }
+        // The end bits: exactly the pixels holding an on-screen end.
+        let mut want = vec![0u64; out.ends.len()];
+        for p in [e.a, e.b] {
+            let [sx, sy] = prj.pixel(p).expect("in front");
+            if sx >= 0.0 && sy >= 0.0 && sx < w as f64 && sy < h as f64 {
+                want[sy as usize * w.div_ceil(64) + sx as usize / 64] |= 1 << (sx as usize % 64);
+                ends_seen += 1;
+            }
+        }
+        assert_eq!(out.ends, want, "trial {trial}");
+    }
+    assert!(checked > 60 * 20 && ends_seen > 30, "{checked} crossings, {ends_seen} ends");
+}
