@@ -127,22 +127,18 @@ impl SimpleColours {
     }
 }
 
-/// Where the crossing at perimeter index `e` of pixel (x, y) lies in its unit square, from
-/// the fine positions; `None` without them, or where the fine position is not in the
-/// crossing's eighth (which a simple pixel's crossings always are, being the only ones on
-/// their sides).
+/// Where the crossing at perimeter index `e` of pixel (x, y) lies in its unit square: in
+/// the eighth `e` names, at the fine position within it (a simple pixel's crossing is the
+/// only one on its side); `None` without fine positions.
 #[inline]
 fn crossing(bounds: &Boundaries, x: usize, y: usize, e: u32) -> Option<[f32; 2]> {
     let (side, pos) = (e / PIXEL.segments, e % PIXEL.segments);
-    let q = bounds.fine_at(x, y, side)?;
-    (q >> 13 == pos).then(|| {
-        let t = fine_fraction(q);
-        match side {
-            TOP => [t, 0.0],
-            RIGHT => [1.0, t],
-            BOTTOM => [t, 1.0],
-            _ => [0.0, t],
-        }
+    let t = fine_fraction(pos << 8 | bounds.fine_at(x, y, side)?);
+    Some(match side {
+        TOP => [t, 0.0],
+        RIGHT => [1.0, t],
+        BOTTOM => [t, 1.0],
+        _ => [0.0, t],
     })
 }
 

@@ -25,7 +25,7 @@
 //! networking.
 //!
 //! Per-pixel memory (bytes per pixel, see [`Epi::memory`] and the bench `epi`): boundary
-//! masks 2 (+2 with the complex filter's centre lines), the crossings' fine positions 4 and
+//! masks 2 (+2 with the complex filter's centre lines), the crossings' fine positions 2 and
 //! segment-end bits 0.125 (for the anti-aliasing's exact areas), conservative depth 4, EPI pixel 2
 //! (edge code, sample region, flags), flag planes 0.5, interpolated and hole planes 0.25,
 //! neighbour masks 1, reachability 1.5; plus 24 bytes per simple pixel for anti-aliasing and
@@ -368,7 +368,7 @@ impl Epi {
         vec![
             ("boundary masks (sides)", 2 * self.bounds.sides.len()),
             ("boundary masks (centre lines)", 2 * self.bounds.centres.len()),
-            ("crossing positions (anti-aliasing)", 4 * self.bounds.fine.len()),
+            ("crossing positions (anti-aliasing)", 2 * self.bounds.fine.len()),
             ("segment-end bits (anti-aliasing)", 8 * self.bounds.ends.len()),
             ("conservative depth", self.depth.bytes()),
             ("EPI pixels (edge code, sample region, flags)", 2 * self.pixels.len()),

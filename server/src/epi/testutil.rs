@@ -17,7 +17,7 @@ fn eighth(f: f64) -> u32 {
 /// [`super::raster::Boundaries`], or none (empty: the anti-aliasing uses quantised areas).
 #[derive(Default)]
 pub struct Fine {
-    pub positions: Vec<u32>,
+    pub positions: Vec<u16>,
     pub ends: Vec<u64>,
 }
 
@@ -64,8 +64,9 @@ pub fn draw_segment(w: usize, h: usize, sides: &mut [u16], centres: &mut [u16], 
                         sides[row * (w + 1) + col] |= bit;
                         if let Some(f) = fine.positions.get_mut(row * (w + 1) + col) {
                             let fq = fine_position(q - qq);
-                            assert_eq!(fq >> 13, eighth(q - qq));
-                            *f = if axis == 0 { (*f & 0xFFFF_0000) | fq } else { (*f & 0xFFFF) | fq << 16 };
+                            assert_eq!(fq >> 8, eighth(q - qq));
+                            let byte = (fq & 0xFF) as u16;
+                            *f = if axis == 0 { (*f & 0xFF00) | byte } else { (*f & 0x00FF) | byte << 8 };
                         }
                     }
                 }

@@ -5,9 +5,9 @@
 //! With the complex filter on (§5.4) the crossings with the two centre lines of each pixel
 //! (`x = X + 1/2`, `y = Y + 1/2`) are recorded as well.
 //!
-//! Beside the masks, each pixel side keeps the position of its last recorded crossing at
-//! 1/65536 of the side ([`Boundaries::fine`]; its top three bits are the crossing's eighth):
-//! classification and reachability use only the eighths (§4.2), the anti-aliasing of
+//! Beside the masks, each pixel side keeps where its last recorded crossing lies within its
+//! eighth, in 1/256 of the eighth ([`Boundaries::fine`]: 1/2048 of the side, one byte a side,
+//! 2 bytes per pixel): classification and reachability use only the eighths (§4.2), the anti-aliasing of
 //! simple pixels (§5.3) the exact positions, since on a long, nearly horizontal edge the
 //! eighth is the same along a whole run of pixels and the error of its area does not
 //! average out.
@@ -42,39 +42,39 @@ pub struct Boundaries {
     /// vertical centre line `x + 1/2` within `[y, y + 1)`, high byte the horizontal one
     /// `y + 1/2` within `[x, x + 1)`.
     pub centres: Vec<u16>,
-    /// Parallel to `sides`: the low half the position along the left side of its last
-    /// recorded crossing, the high half along the top side, in 1/65536 of the side (see
-    /// [`fine_position`]); meaningful only where the side's mask has a bit, whose eighth is
-    /// the position's top three bits. Never cleared (written with every bit). Empty when
-    /// the masks came from elsewhere (tests): the anti-aliasing then uses the eighths.
-    pub fine: Vec<u32>,
+    /// Parallel to `sides`: the low byte where the left side's last recorded crossing lies
+    /// within its eighth, the high byte the top side's, in 1/256 of the eighth (the low byte
+    /// of [`fine_position`]); meaningful where the side's mask has exactly one bit (the
+    /// eighth), as a simple pixel's crossed sides have. Never cleared (written with every
+    /// bit). Empty when the masks came from elsewhere (tests): the anti-aliasing then uses
+    /// the eighths.
+    pub fine: Vec<u16>,
     /// Bit rows (`ceil(width / 64)` words per row): the pixels holding a visible end of a
     /// segment — where an outline may turn (a rectangle's corner), so that the crossings of
     /// a simple pixel need not lie on one line. Empty with `fine`.
     pub ends: Vec<u64>,
 }
 
-/// A crossing at `f` ∈ [0, 1) along a side, in 1/65536 of the side: its eighth (paper 000
-/// §4.2) is `q >> 13` (the same as `floor(8 f)`: both scalings are exact), and
-/// `(q + 1/2) / 65536` is within 2^-17 of `f` — a quarter of the spacing of f32 pixel
-/// coordinates between 256 and 512.
+/// A crossing at `f` ∈ [0, 1) along a side, in 1/2048 of the side: its eighth (paper 000
+/// §4.2) is `q >> 8` (the same as `floor(8 f)`: both scalings are exact), the low byte is
+/// what [`Boundaries::fine`] keeps, and `(q + 1/2) / 2048` is within 2^-12 of `f`.
 #[inline]
 pub fn fine_position(f: f64) -> u32 {
-    ((f * 65536.0) as u32).min(65535)
+    ((f * 2048.0) as u32).min(2047)
 }
 
 /// The side position `q` of [`fine_position`] as a fraction of the side.
 #[inline]
 pub fn fine_fraction(q: u32) -> f32 {
-    (q as f32 + 0.5) * (1.0 / 65536.0)
+    (q as f32 + 0.5) * (1.0 / 2048.0)
 }
 
 impl Boundaries {
     /// Bytes of the masks of a `width` × `height` image, with the centre lines the complex
     /// filter adds ([`crate::epi::Epi::build`] allocates them on its first frame with it),
-    /// the crossings' fine positions (4 bytes per grid vertex) and the segment-end bits.
+    /// the crossings' fine positions (2 bytes per grid vertex) and the segment-end bits.
     pub fn bytes_for(width: usize, height: usize) -> usize {
-        (2 + 4) * (width + 1) * (height + 1) + 2 * width * height + 8 * height * width.div_ceil(64)
+        (2 + 2) * (width + 1) * (height + 1) + 2 * width * height + 8 * height * width.div_ceil(64)
     }
 
     pub fn new(width: usize, height: usize) -> Self {
@@ -83,7 +83,7 @@ impl Boundaries {
     }
 
     pub fn bytes(&self) -> usize {
-        2 * (self.sides.len() + self.centres.len()) + 4 * self.fine.len() + 8 * self.ends.len()
+        2 * (self.sides.len() + self.centres.len() + self.fine.len()) + 8 * self.ends.len()
     }
 
     /// Whether pixel (x, y) holds a visible segment end (false without fine positions).
@@ -92,8 +92,9 @@ impl Boundaries {
         self.ends.get(y * self.width.div_ceil(64) + x / 64).is_some_and(|&word| (word >> (x % 64)) & 1 == 1)
     }
 
-    /// The fine position (see [`fine_position`]) of the crossing of pixel (x, y)'s side
-    /// (`code::TOP` … `code::LEFT`), if the boundaries have fine positions.
+    /// Where the crossing of pixel (x, y)'s side (`code::TOP` … `code::LEFT`) lies within its
+    /// eighth, in 1/256 of it (the low byte of [`fine_position`]), if the boundaries have
+    /// fine positions; meaningful where the side has one crossing.
     #[inline]
     pub fn fine_at(&self, x: usize, y: usize, side: u32) -> Option<u32> {
         let stride = self.width + 1;
@@ -104,7 +105,7 @@ impl Boundaries {
             _ => (x, y, false),
         };
         let f = *self.fine.get(vy * stride + vx)?;
-        Some(if high { f >> 16 } else { f & 0xFFFF })
+        Some(u32::from(if high { f >> 8 } else { f & 0xFF }))
     }
 
     #[inline]
@@ -361,7 +362,7 @@ struct Band<'a> {
 /// A band's rows of [`Boundaries`]' buffers.
 struct BandOut<'a> {
     sides: &'a mut [u16],
-    fine: &'a mut [u32],
+    fine: &'a mut [u16],
     centres: &'a mut [u16],
     ends: &'a mut [u64],
 }
@@ -440,8 +441,8 @@ impl Band<'_> {
                         centres[row * w + xl as usize] |= 1u16 << eighth(y - yy);
                     } else {
                         let (i, q) = (row * (w + 1) + xl as usize, fine_position(y - yy));
-                        sides[i] |= 1u16 << (q >> 13);
-                        fine[i] = (fine[i] & 0xFFFF_0000) | q;
+                        sides[i] |= 1u16 << (q >> 8);
+                        fine[i] = (fine[i] & 0xFF00) | (q & 0xFF) as u16;
                     }
                     c.fragments += 1;
                 }
@@ -470,8 +471,8 @@ impl Band<'_> {
                             continue;
                         }
                         let (i, q) = ((yl as usize - self.y_lo) * (w + 1) + xx as usize, fine_position(x - xx));
-                        sides[i] |= 1u16 << (8 + (q >> 13));
-                        fine[i] = (fine[i] & 0xFFFF) | q << 16;
+                        sides[i] |= 1u16 << (8 + (q >> 8));
+                        fine[i] = (fine[i] & 0x00FF) | ((q & 0xFF) as u16) << 8;
                     } else {
                         if culled(inv_depth(t), x, yl as f64 + 0.5, false) {
                             c.culled += 1;
