@@ -2,15 +2,16 @@
 //! in the renderer", steps 4–10). Per frame:
 //!
 //! 1. [`depth`] — conservative depth from the reprojected points (§4.5);
-//! 2. [`raster`] — edge rasterization: crossings of pixel boundaries at 1/8 pixel, occlusion
-//!    culling, centre lines for the complex filter (§4.5, §5.4);
+//! 2. [`raster`] — edge rasterization: crossings of pixel boundaries at 1/8 pixel (and where
+//!    within its eighth, for the anti-aliasing's exact areas), occlusion culling, centre lines
+//!    for the complex filter (§4.5, §5.4);
 //! 3. [`code`] — classification (empty / simple / complex), 10-bit edge codes, sample
 //!    regions and sides through the [`tables`] (§4.1–4.4, §5.1);
 //! 4. [`reach`] — reachability in the 5 × 5 neighbourhood (§5.2);
 //! 5. [`interpolate`] — edge-respecting interpolation; its weights drive sampling (§5.3);
 //!    [`spread`] then colours the pixels that reach no sample from their neighbours within
 //!    the same region (our addition);
-//! 6. [`antialias`] — anti-aliasing of simple pixels (§5.3);
+//! 6. [`antialias`] — anti-aliasing of simple pixels (§5.3), with their real edges' areas;
 //! 7. [`complex`] — the complex-pixel filter (§5.4);
 //! 8. [`overlay`] — diagnostic views of the EPI.
 //!

@@ -216,7 +216,7 @@ fn fine_positions_are_the_crossings_and_end_bits_the_pixels_holding_segment_ends
                         continue;
                     }
                     assert_eq!(bits.count_ones(), 1, "trial {trial}: ({x}, {y})");
-                    let q = u32::from(bits.trailing_zeros()) << 8 | u32::from(byte);
+                    let q = bits.trailing_zeros() << 8 | u32::from(byte);
                     let (pos, _) = cross(&cam, w, h, &e, vertical, line as f64).expect("a recorded crossing is a crossing");
                     let exact = pos - cell as f64;
                     assert!((fine_fraction(q) as f64 - exact).abs() <= 2f64.powi(-12) + 1e-6, "trial {trial}: ({x}, {y}) vertical {vertical}: {} against {exact}", fine_fraction(q));
