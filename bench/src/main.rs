@@ -18,6 +18,8 @@
 //! - `reference`: render the 1-spp and converged references of a scene to PNG files.
 //! - `epi`: per-stage times of the edge-and-point image (rasterize, reach, interpolate,
 //!   anti-alias, complex) at 512² and 1024², one thread and all, and bytes per pixel.
+//! - `sampling`: the frame loop's work after publishing — picking the next frame's pixels,
+//!   aiming them at cached points, building the request batches — against one priority pass.
 //! - `encode`: the frame's conversion to sRGB, QOI / raw encoding and publishing, against
 //!   the encoder before (kept in the bench as the baseline), one thread and all.
 //! - `materials`: ns per `eval` / `sample` / `pdf` call of each scattering model, and the
@@ -49,6 +51,7 @@ mod converge;
 mod dmesh;
 mod edges;
 mod encode;
+mod sampling;
 mod epi;
 mod exact_area;
 mod frame;
@@ -119,6 +122,8 @@ enum Cmd {
     Materials(materials::MaterialsArgs),
     /// Frame encoding (sRGB, QOI, raw) and publishing against the previous encoder.
     Encode(encode::EncodeArgs),
+    /// The next frame's picks (priorities, budget, dither), aiming and request batches on a real frame's priorities.
+    Sampling(sampling::SamplingArgs),
     /// Fuzz the scene parsers: mutated seed inputs; panics, slow parses and out-of-proportion
     /// allocations are findings, kept in the crash corpus.
     Fuzz(fuzz::FuzzArgs),
@@ -158,6 +163,7 @@ fn main() -> anyhow::Result<()> {
         Cmd::Epi(a) => epi::run(a),
         Cmd::Quality(a) => quality::run(a),
         Cmd::Encode(a) => encode::run(a),
+        Cmd::Sampling(a) => sampling::run(a),
         Cmd::Materials(a) => materials::run(a),
         Cmd::Edges(a) => edges::run(a),
         Cmd::Motion(a) => motion::run(a),

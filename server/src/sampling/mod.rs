@@ -133,19 +133,23 @@ pub struct Sampler {
 /// One band of rows of the dithering, with its own buffers and picks.
 #[derive(Default)]
 struct DitherBand {
-    /// Diffused error of the current and the next row (one guard cell each side).
+    /// Diffused error of the current and the next row, by logical column + 1 (one guard
+    /// cell each side).
     err_cur: Vec<f32>,
     err_next: Vec<f32>,
-    /// The row being dithered, in scan (logical) order: scaled priority, and scaled
-    /// priority plus the error diffused into it from the row before.
-    row_q: Vec<f32>,
-    row_a: Vec<f32>,
+    /// The row being dithered, in scan order: scaled priority plus the error diffused into
+    /// it from the row before (`a`), the same minus the 7/16 a pick passes on (`b`), the
+    /// threshold (`t`), and the diffused value the scan reaches at each pixel (`v`).
+    a: Vec<f32>,
+    b: Vec<f32>,
+    t: Vec<f32>,
+    v: Vec<f32>,
     picks: Vec<PixelRequest>,
 }
 
 impl DitherBand {
     fn new(w: usize) -> Self {
-        DitherBand { err_cur: vec![0.0; w + 2], err_next: vec![0.0; w + 2], row_q: vec![0.0; w], row_a: vec![0.0; w], picks: Vec::new() }
+        DitherBand { err_cur: vec![0.0; w + 2], err_next: vec![0.0; w + 2], a: vec![0.0; w], b: vec![0.0; w], t: vec![0.0; w], v: vec![0.0; w], picks: Vec::new() }
     }
 }
 
@@ -189,16 +193,20 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 /// pixel without a point, with a stale one (something changed it: it is replaced, not
 /// averaged), or whose sample is edge-ambiguous or in a complex pixel keeps its jittered
 /// position, so new points still land elsewhere in it.
-pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::PointImage, usable: impl Fn(u32, u32) -> bool) {
+pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::PointImage, usable: impl Fn(u32, u32) -> bool + Sync) {
     let w = points.width as usize;
-    for p in picks.iter_mut() {
-        let i = p.y as usize * w + p.x as usize;
-        let Some(&point) = points.point.get(i) else { continue };
-        if point != NO_POINT && points.age[i] < crate::render_cache::STALE_AGE && usable(p.x, p.y) {
-            let [u, v] = points.subpixel[i];
-            (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+    // In parallel: each pick reads three arrays of the point image at its own pixel, most of
+    // them cache misses (the frame loop's other passes have run since).
+    picks.par_chunks_mut(2048).for_each(|chunk| {
+        for p in chunk {
+            let i = p.y as usize * w + p.x as usize;
+            let Some(&point) = points.point.get(i) else { continue };
+            if point != NO_POINT && points.age[i] < crate::render_cache::STALE_AGE && usable(p.x, p.y) {
+                let [u, v] = points.subpixel[i];
+                (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+            }
         }
-    }
+    });
 }
 
 /// Of the priorities `c` at scale `s`: how many saturate (`p · s ≥ 1`, picked for sure), and
@@ -234,7 +242,7 @@ impl Sampler {
         let (w, n) = (width as usize, width as usize * height as usize);
         let bands = (height as usize).div_ceil(DITHER_BAND_ROWS);
         // Priorities and row sums; per band its rows' buffers.
-        4 * n + 8 * height as usize + bands * (2 * 4 * (w + 2) + 2 * 4 * w)
+        4 * n + 8 * height as usize + bands * (2 * 4 * (w + 2) + 4 * 4 * w)
     }
 
     /// Bytes the bands' picks grow to at most (they start empty): a band picks a pixel of
@@ -353,58 +361,20 @@ impl Sampler {
     fn dither(&mut self, frame: u64, scale: f32, budget: usize, out: &mut Vec<PixelRequest>) {
         let (w, h) = (self.width as usize, self.height as usize);
         let frame_key = mix64(self.seed ^ mix64(frame));
-        let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
-        let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
-        let flip = frame & 1 == 1;
+        let scan = FrameScan {
+            w,
+            h,
+            ox: (mix64(frame_key ^ 1) % w as u64) as usize,
+            oy: (mix64(frame_key ^ 2) % h as u64) as usize,
+            flip: frame & 1 == 1,
+            frame_key,
+            scale,
+            budget,
+        };
         let prio = &self.prio;
-        self.bands.par_iter_mut().enumerate().for_each(|(b, band)| {
-            band.picks.clear();
-            band.err_cur.iter_mut().for_each(|e| *e = 0.0);
-            band.err_next.iter_mut().for_each(|e| *e = 0.0);
-            // Thresholds from one xorshift64* stream per band and frame (cheaper than a
-            // hash per pixel).
-            let mut rng = band_stream(frame_key, b);
-            let first = b * DITHER_BAND_ROWS;
-            for ly in first.saturating_sub(DITHER_WARM_UP_ROWS)..((b + 1) * DITHER_BAND_ROWS).min(h) {
-                if ly == first {
-                    band.picks.clear();
-                }
-                let y = (ly + oy) % h;
-                let left_to_right = (ly % 2 == 0) != flip;
-                // The row in scan order (logical column lx is physical column (lx + ox) % w),
-                // scaled and capped, plus the error diffused into it: straight loops off the
-                // scan's critical path.
-                let row = &prio[y * w..(y + 1) * w];
-                let (head, tail) = band.row_q.split_at_mut(w - ox);
-                for (q, &p) in head.iter_mut().zip(&row[ox..]) {
-                    *q = (p * scale).min(1.0);
-                }
-                for (q, &p) in tail.iter_mut().zip(&row[..ox]) {
-                    *q = (p * scale).min(1.0);
-                }
-                for ((a, &q), &c) in band.row_a.iter_mut().zip(&band.row_q).zip(&band.err_cur[1..]) {
-                    *a = q + c;
-                }
-                // Warm-up rows never end the band: their picks are not kept.
-                let budget = if ly < first { usize::MAX } else { budget };
-                let mut scan = RowScan { q: &band.row_q, a: &band.row_a, y, ox, next: &mut band.err_next, rng: &mut rng, budget, out: &mut band.picks };
-                let (done, carry) = if left_to_right { scan.run::<true>() } else { scan.run::<false>() };
-                if done {
-                    return;
-                }
-                // Fold the error pushed past the row's ends back into the image instead of
-                // losing it: at sparse priorities the lost error would cost a good part of
-                // the budget. The row ended at the right edge when scanning left-to-right.
-                let next = &mut band.err_next;
-                let end_cell = if left_to_right { w } else { 1 };
-                next[end_cell] += carry;
-                next[1] += next[0];
-                next[w] += next[w + 1];
-                next[0] = 0.0;
-                next[w + 1] = 0.0;
-                // The scan writes every cell of the next row's buffer, so it needs no clearing.
-                std::mem::swap(&mut band.err_cur, &mut band.err_next);
-            }
+        self.bands.par_chunks_mut(2).enumerate().for_each(|(p, pair)| {
+            let (first, second) = pair.split_first_mut().expect("chunks are not empty");
+            dither_pair(&scan, prio, 2 * p, first, second.first_mut())
         });
         for band in &self.bands {
             let take = (budget - out.len()).min(band.picks.len());
@@ -416,88 +386,353 @@ impl Sampler {
     }
 }
 
-/// The xorshift64* state of band `b`'s thresholds in the frame of `frame_key` (never zero).
-#[inline]
-fn band_stream(frame_key: u64, b: usize) -> u64 {
-    mix64(frame_key ^ (3 + b as u64)) | 1
-}
-
-/// One row of the serpentine error diffusion, over the row in scan order. The next row's
-/// error buffer is indexed by logical column + 1 (guard cells at both ends).
-struct RowScan<'a> {
-    /// Scaled, capped priorities.
-    q: &'a [f32],
-    /// The same plus the error diffused from the row before.
-    a: &'a [f32],
-    y: usize,
+/// What every band of one frame's dithering shares.
+struct FrameScan {
+    w: usize,
+    h: usize,
+    /// Cyclic shift of the scan: logical pixel (lx, ly) is physical ((lx + ox) % w, (ly + oy) % h).
     ox: usize,
-    next: &'a mut [f32],
-    rng: &'a mut u64,
+    oy: usize,
+    /// Whether even logical rows run right to left this frame.
+    flip: bool,
+    frame_key: u64,
+    scale: f32,
     budget: usize,
-    out: &'a mut Vec<PixelRequest>,
 }
 
-impl RowScan<'_> {
-    /// Scans the row (left to right when `LTR`). Returns whether the budget is reached and
-    /// the error carried past the row's end.
-    ///
-    /// Only the carried error and the random stream are serial; the error pushed into the
-    /// next row is kept in registers for the two cells still receiving it and written once
-    /// per cell, with the same additions in the same order as adding into the buffer.
+/// The share of a pixel's error passed to the next pixel of its row (Floyd–Steinberg 7/16).
+const AHEAD: f32 = 7.0 / 16.0;
+
+/// The threshold key of band `b`'s rows in the frame of `frame_key`.
+#[inline]
+fn band_key(frame_key: u64, b: usize) -> u32 {
+    (mix64(frame_key ^ (3 + b as u64)) >> 32) as u32
+}
+
+/// A 32-bit hash with full avalanche (MurmurHash3's finaliser): independent thresholds per
+/// pixel from a counter, in straight loops that vectorise (no serial random stream).
+#[inline(always)]
+fn fmix32(mut h: u32) -> u32 {
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x85eb_ca6b);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0xc2b2_ae35);
+    h ^ (h >> 16)
+}
+
+/// The dither threshold of logical pixel index `idx` under `key`, uniform in [0, 1) from 24
+/// bits; `-inf` where the scaled priority `q` is saturated (always picked) and `+inf` where
+/// it is 0 (never picked).
+#[inline(always)]
+fn threshold(key: u32, idx: u32, q: f32) -> f32 {
+    let u = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * ((fmix32(key ^ idx) >> 8) as f32 * (1.0 / (1u32 << 24) as f32));
+    if q >= 1.0 {
+        f32::NEG_INFINITY
+    } else if q > 0.0 {
+        u
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// Step 1 of [`dither_pair_rows`] over a run of logical columns starting at index `base`:
+/// scaled, capped priorities plus the error from the row before, and their thresholds.
+#[inline(always)]
+fn scaled_row(a: &mut [f32], t: &mut [f32], prio: &[f32], err: &[f32], scale: f32, key: u32, base: u32) {
+    for (i, ((a, t), (&p, &e))) in a.iter_mut().zip(t.iter_mut()).zip(prio.iter().zip(err)).enumerate() {
+        let q = (p * scale).min(1.0);
+        *a = q + e;
+        *t = threshold(key, base.wrapping_add(i as u32), q);
+    }
+}
+
+/// The jittered position of a pick at physical pixel (x, y), hashed from the band's key and
+/// the pixel's logical index.
+#[inline]
+fn pick_at(key: u32, idx: u32, x: usize, y: usize) -> PixelRequest {
+    let h = mix64((key as u64) << 32 | idx as u64);
+    PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h)), sy: inside_pixel(y as u32, unit(h << 24)), point: NO_POINT }
+}
+
+/// Bands `b` and `b + 1` (if `second` is given), with AVX2 and FMA where the CPU has them.
+/// Both paths make the same IEEE operations in the same order (the serial step is a fused
+/// multiply-add either way), so they pick the same pixels.
+fn dither_pair(scan: &FrameScan, prio: &[f32], b: usize, first: &mut DitherBand, second: Option<&mut DitherBand>) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            unsafe { dither_pair_avx2(scan, prio, b, first, second) };
+            return;
+        }
+    }
+    dither_pair_rows(scan, prio, b, first, second, chain, |x, y| {
+        chain(x.0, x.1, x.2, x.3);
+        chain(y.0, y.1, y.2, y.3);
+    })
+}
+
+#[cfg(target_arch = "x86_64")]
+fn has_avx2_fma() -> bool {
+    static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *HAS.get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn dither_pair_avx2(scan: &FrameScan, prio: &[f32], b: usize, first: &mut DitherBand, second: Option<&mut DitherBand>) {
+    // SAFETY (of the calls inside): this function only runs where the CPU has AVX2 and FMA.
+    dither_pair_rows(scan, prio, b, first, second, |a, b, t, v| unsafe { chain_avx2(a, b, t, v) }, |x, y| unsafe { chain2_avx2(x, y) })
+}
+
+/// One row's inputs and output of step 2: `a`, `b`, `t`, `v` (see [`dither_pair_rows`]).
+type ChainRow<'a> = (&'a [f32], &'a [f32], &'a [f32], &'a mut [f32]);
+
+/// Step 2 of [`dither_pair_rows`] written plainly.
+#[inline(always)]
+fn chain(a: &[f32], b: &[f32], t: &[f32], v: &mut [f32]) {
+    let w = v.len();
+    let mut x = a[0];
+    for (((v, &t), &a), &b) in v.iter_mut().zip(&t[..w - 1]).zip(&a[1..]).zip(&b[1..]) {
+        *v = x;
+        x = AHEAD.mul_add(x, if x >= t { b } else { a });
+    }
+    v[w - 1] = x;
+}
+
+/// Step 2 with the compare, the select and the fused multiply-add as instructions: written
+/// plainly, the compiler turns the select into a branch, mispredicted at every pick.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn chain_avx2(a: &[f32], b: &[f32], t: &[f32], v: &mut [f32]) {
+    use std::arch::x86_64::*;
+    let w = v.len();
+    assert!(a.len() == w && b.len() == w && t.len() == w);
+    // Lane 0 carries the values; the other lanes compute alongside (whole-register
+    // instructions need no merging of the upper lanes) and are never read.
+    let ahead = _mm_set1_ps(AHEAD);
+    let mut x = _mm_set1_ps(a[0]);
+    for i in 0..w - 1 {
+        v[i] = _mm_cvtss_f32(x);
+        // SAFETY: i + 1 < w, the length of every slice (asserted above).
+        let (an, bn, ti) = unsafe { (_mm_load_ss(a.as_ptr().add(i + 1)), _mm_load_ss(b.as_ptr().add(i + 1)), _mm_load_ss(t.as_ptr().add(i))) };
+        // All ones where x >= t (ordered: no NaN reaches here).
+        let picked = _mm_cmp_ps::<_CMP_GE_OQ>(x, ti);
+        x = _mm_fmadd_ps(ahead, x, _mm_blendv_ps(an, bn, picked));
+    }
+    v[w - 1] = _mm_cvtss_f32(x);
+}
+
+/// [`chain_avx2`] over two rows of the same width at once, one in lane 0 and one in lane
+/// 1: the chain is latency-bound (compare, select, multiply-add: about 8 cycles a pixel),
+/// and the second row's steps fill the same instructions for free.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn chain2_avx2(x: ChainRow<'_>, y: ChainRow<'_>) {
+    use std::arch::x86_64::*;
+    let w = x.3.len();
+    assert!([x.0.len(), x.1.len(), x.2.len(), y.0.len(), y.1.len(), y.2.len(), y.3.len()].iter().all(|&n| n == w));
+    let ahead = _mm_set1_ps(AHEAD);
+    // Lanes (0, 1) = (row x, row y); lanes 2 and 3 are never read.
+    let pair = |p: &[f32], q: &[f32], i: usize| {
+        // SAFETY: i < w, the length of both slices (asserted above).
+        unsafe { _mm_unpacklo_ps(_mm_load_ss(p.as_ptr().add(i)), _mm_load_ss(q.as_ptr().add(i))) }
+    };
+    let mut val = pair(x.0, y.0, 0);
+    for i in 0..w - 1 {
+        x.3[i] = _mm_cvtss_f32(val);
+        y.3[i] = _mm_cvtss_f32(_mm_movehdup_ps(val));
+        let (an, bn, ti) = (pair(x.0, y.0, i + 1), pair(x.1, y.1, i + 1), pair(x.2, y.2, i));
+        let picked = _mm_cmp_ps::<_CMP_GE_OQ>(val, ti);
+        val = _mm_fmadd_ps(ahead, val, _mm_blendv_ps(an, bn, picked));
+    }
+    x.3[w - 1] = _mm_cvtss_f32(val);
+    y.3[w - 1] = _mm_cvtss_f32(_mm_movehdup_ps(val));
+}
+
+/// One logical row of a band between step 1 and step 3.
+#[derive(Clone, Copy)]
+struct BandRow {
+    ly: usize,
+    /// The physical row.
+    y: usize,
+    ltr: bool,
+    /// Logical index of the row's first pixel (the threshold counter).
+    base: u32,
+}
+
+impl DitherBand {
+    /// The logical rows band `b` scans (its warm-up rows first).
+    fn rows(b: usize, h: usize) -> std::ops::Range<usize> {
+        (b * DITHER_BAND_ROWS).saturating_sub(DITHER_WARM_UP_ROWS)..((b + 1) * DITHER_BAND_ROWS).min(h)
+    }
+
+    /// Step 1 of [`dither_pair_rows`] for logical row `ly`.
     #[inline(always)]
-    fn run<const LTR: bool>(&mut self) -> (bool, f32) {
-        let w = self.q.len();
-        // The 7/16 share for the next pixel of the row.
-        let mut carry = 0.0f32;
-        // Partial errors of the next row's cells `lx + 2` / `lx + 1` behind and ahead (LTR:
-        // cells lx + 1 and lx + 2 of the buffer; RTL: lx + 1 and lx), zero before any share.
-        let (mut near, mut far) = (0.0f32, 0.0f32);
-        let mut rng = *self.rng;
-        for step in 0..w {
-            let lx = if LTR { step } else { w - 1 - step };
-            let q = self.q[lx];
-            let v = self.a[lx] + carry;
-            rng ^= rng >> 12;
-            rng ^= rng << 25;
-            rng ^= rng >> 27;
-            let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
-            let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
-            let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
-                let x = if self.ox + lx >= w { self.ox + lx - w } else { self.ox + lx };
-                let h2 = mix64(hsh);
-                self.out.push(PixelRequest {
-                    x: x as u32,
-                    y: self.y as u32,
-                    sx: inside_pixel(x as u32, unit(h2)),
-                    sy: inside_pixel(self.y as u32, unit(h2 << 24)),
-                    point: NO_POINT,
-                });
-                if self.out.len() == self.budget {
-                    *self.rng = rng;
-                    return (true, 0.0);
+    fn prepare(&mut self, scan: &FrameScan, prio: &[f32], key: u32, ly: usize) -> BandRow {
+        let &FrameScan { w, h, ox, oy, flip, scale, .. } = scan;
+        let y = (ly + oy) % h;
+        let ltr = (ly % 2 == 0) != flip;
+        let row = &prio[y * w..(y + 1) * w];
+        let base = (ly * w) as u32;
+        // In logical order (logical column lx is physical column (lx + ox) % w), then
+        // reversed for a right-to-left row.
+        let cur = &self.err_cur[1..w + 1];
+        let (a, bb, t) = (&mut self.a[..w], &mut self.b[..w], &mut self.t[..w]);
+        let (a_head, a_tail) = a.split_at_mut(w - ox);
+        let (t_head, t_tail) = t.split_at_mut(w - ox);
+        let (cur_head, cur_tail) = cur.split_at(w - ox);
+        scaled_row(a_head, t_head, &row[ox..], cur_head, scale, key, base);
+        scaled_row(a_tail, t_tail, &row[..ox], cur_tail, scale, key, base.wrapping_add((w - ox) as u32));
+        if !ltr {
+            a.reverse();
+            t.reverse();
+        }
+        for (b, &a) in bb.iter_mut().zip(a.iter()) {
+            *b = a - AHEAD;
+        }
+        BandRow { ly, y, ltr, base }
+    }
+
+    /// Step 2's slices.
+    fn chain_row(&mut self, w: usize) -> ChainRow<'_> {
+        (&self.a[..w], &self.b[..w], &self.t[..w], &mut self.v[..w])
+    }
+
+    /// Step 3 of [`dither_pair_rows`]: the row's picks (kept when `keep`) and the error
+    /// into the next row. Returns whether the band's picks reached the budget.
+    #[inline(always)]
+    fn finish(&mut self, scan: &FrameScan, key: u32, r: BandRow, keep: bool) -> bool {
+        let &FrameScan { w, ox, budget, .. } = scan;
+        let BandRow { y, ltr, base, .. } = r;
+        let (v, t) = (&self.v[..w], &self.t[..w]);
+        // The picks, from a bit mask per 32 pixels (the compares vectorise; most pixels are
+        // not picked).
+        if keep {
+            for (c, (vc, tc)) in v.chunks(32).zip(t.chunks(32)).enumerate() {
+                let mut bits = vc.iter().zip(tc).enumerate().fold(0u32, |m, (k, (&v, &t))| m | (((v >= t) as u32) << k));
+                while bits != 0 {
+                    let i = c * 32 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let lx = if ltr { i } else { w - 1 - i };
+                    let px = if ox + lx >= w { ox + lx - w } else { ox + lx };
+                    self.picks.push(pick_at(key, base.wrapping_add(lx as u32), px, y));
+                    if self.picks.len() == budget {
+                        return true;
+                    }
                 }
-                v - 1.0
+            }
+        }
+        // The error each pixel passes on, in scan order (into `b`, free now), then the next
+        // row's cells: scan position i gets 1/16 of the error before it, 5/16 of its own and
+        // 3/16 of the one after it (whichever way the row ran), added in that order.
+        let e = &mut self.b[..w];
+        for ((e, &v), &t) in e.iter_mut().zip(v.iter()).zip(t.iter()) {
+            *e = if v >= t { v - 1.0 } else { v };
+        }
+        let next = &mut self.err_next;
+        // The cells of scan positions -1..=w, stored by logical column + 1: the interior
+        // ones in a straight loop, the two at each end (fewer neighbours) one by one.
+        let cell = |i: usize| if ltr { i } else { w + 1 - i };
+        if w >= 3 {
+            let interior = &mut next[2..w];
+            let windows = e[..w - 2].iter().zip(&e[1..w - 1]).zip(&e[2..]);
+            if ltr {
+                for (c, ((&before, &own), &after)) in interior.iter_mut().zip(windows) {
+                    *c = before * (1.0 / 16.0) + own * (5.0 / 16.0) + after * (3.0 / 16.0);
+                }
             } else {
-                v
-            };
-            carry = e * (7.0 / 16.0);
-            // The cell behind gets its last share (3/16) and is final; the middle one its
-            // second (5/16); the one ahead its first (1/16).
-            let behind = if LTR { lx } else { lx + 2 };
-            self.next[behind] = near + e * (3.0 / 16.0);
-            near = far + e * (5.0 / 16.0);
-            far = 0.0 + e * (1.0 / 16.0);
+                for (c, ((&before, &own), &after)) in interior.iter_mut().rev().zip(windows) {
+                    *c = before * (1.0 / 16.0) + own * (5.0 / 16.0) + after * (3.0 / 16.0);
+                }
+            }
         }
-        // The last two cells: LTR w and w + 1, RTL 1 and 0.
-        if LTR {
-            self.next[w] = near;
-            self.next[w + 1] = far;
-        } else {
-            self.next[1] = near;
-            self.next[0] = far;
+        let at = |i: isize| if i >= 0 && (i as usize) < w { Some(e[i as usize]) } else { None };
+        for i in [-1, 0, w as isize - 1, w as isize] {
+            let mut c = 0.0f32;
+            if let Some(x) = at(i - 1) {
+                c += x * (1.0 / 16.0);
+            }
+            if let Some(x) = at(i) {
+                c += x * (5.0 / 16.0);
+            }
+            if let Some(x) = at(i + 1) {
+                c += x * (3.0 / 16.0);
+            }
+            next[cell((i + 1) as usize)] = c;
         }
-        *self.rng = rng;
-        (false, carry)
+        // Fold the error pushed past the row's ends back into the image instead of losing
+        // it: at sparse priorities the lost error would cost a good part of the budget. The
+        // row's last pixel passes its 7/16 to its own end cell.
+        let end_cell = if ltr { w } else { 1 };
+        next[end_cell] += e[w - 1] * AHEAD;
+        next[1] += next[0];
+        next[w] += next[w + 1];
+        next[0] = 0.0;
+        next[w + 1] = 0.0;
+        std::mem::swap(&mut self.err_cur, &mut self.err_next);
+        false
+    }
+}
+
+/// The error diffusion of band `b` (and `b + 1`, given `second`), in three steps per row:
+///
+/// 1. straight loops (they vectorise) put the row into scan order: `a` = scaled priority
+///    plus the error from the row before, `b` = `a` − 7/16, `t` = the hashed threshold;
+/// 2. the serial scan: with `v` the value reached at a pixel, the pixel is picked when
+///    `v ≥ t`, and the next pixel's value is `7/16 · v + (picked ? b : a)` — one compare,
+///    one select and one fused multiply-add per pixel on the chain of dependent steps
+///    (`7/16 · (v − 1) + a` with the subtraction folded into `b`); two bands' rows go
+///    through it together (`chain2`), as their chains are independent;
+/// 3. straight loops again: the picks (the compare repeated) in scan order, cut at the
+///    budget, and the error `v − picked` passed to the next row's cells (3/16, 5/16, 1/16).
+///
+/// A band's picks are those of its own rows (not of its warm-up rows), at most the budget.
+#[inline(always)]
+fn dither_pair_rows(
+    scan: &FrameScan,
+    prio: &[f32],
+    b: usize,
+    first: &mut DitherBand,
+    second: Option<&mut DitherBand>,
+    chain: impl Fn(&[f32], &[f32], &[f32], &mut [f32]),
+    chain2: impl Fn(ChainRow<'_>, ChainRow<'_>),
+) {
+    let w = scan.w;
+    let mut second = second;
+    let keys = [band_key(scan.frame_key, b), band_key(scan.frame_key, b + 1)];
+    // Per band: the rows still to scan, and whether it is still picking.
+    let mut left = [DitherBand::rows(b, scan.h), DitherBand::rows(b + 1, scan.h)];
+    let mut live = [true, second.is_some()];
+    for band in std::iter::once(&mut *first).chain(second.as_deref_mut()) {
+        band.picks.clear();
+        band.err_cur.iter_mut().for_each(|e| *e = 0.0);
+    }
+    loop {
+        let r0 = if live[0] { left[0].next().map(|ly| first.prepare(scan, prio, keys[0], ly)) } else { None };
+        let r1 = match second.as_deref_mut() {
+            Some(s) if live[1] => left[1].next().map(|ly| s.prepare(scan, prio, keys[1], ly)),
+            _ => None,
+        };
+        live = [r0.is_some(), r1.is_some()];
+        match (r0.is_some(), second.as_deref_mut().filter(|_| r1.is_some())) {
+            (false, None) => return,
+            (true, Some(s)) => chain2(first.chain_row(w), s.chain_row(w)),
+            (true, None) => {
+                let (a, b, t, v) = first.chain_row(w);
+                chain(a, b, t, v);
+            }
+            (false, Some(s)) => {
+                let (a, b, t, v) = s.chain_row(w);
+                chain(a, b, t, v);
+            }
+        }
+        if let Some(r) = r0 {
+            live[0] = !first.finish(scan, keys[0], r, r.ly >= b * DITHER_BAND_ROWS);
+        }
+        if let (Some(r), Some(s)) = (r1, second.as_deref_mut()) {
+            live[1] = !s.finish(scan, keys[1], r, r.ly >= (b + 1) * DITHER_BAND_ROWS);
+        }
     }
 }
 

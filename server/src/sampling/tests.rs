@@ -189,8 +189,8 @@ fn scaling_meets_the_budget_with_saturated_pixels() {
     }
 }
 
-/// The selection as first written (one plain loop per step, the next row's error added into
-/// its buffer pixel by pixel), the oracle of the optimised [`Sampler::select`]. Row sums are
+/// The selection written plainly (one loop over the pixels in scan order per step, the next
+/// row's error added into its buffer pixel by pixel), the oracle of the optimised [`Sampler::select`]. Row sums are
 /// added up in row order, as the optimised one does (the first version added them in the
 /// order rayon's reduction happened to split the rows).
 #[allow(clippy::too_many_arguments)]
@@ -222,11 +222,11 @@ fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages
     let ox = (mix64(frame_key ^ 1) % w as u64) as usize;
     let oy = (mix64(frame_key ^ 2) % h as u64) as usize;
     let flip = frame & 1 == 1;
-    // Bands of rows, each from zero error with its own stream, warmed up on the rows before
+    // Bands of rows, each from zero error with its own key, warmed up on the rows before
     // it (their picks dropped), its picks after the band before's, cut at the budget.
     for first in (0..h).step_by(DITHER_BAND_ROWS) {
+        let key = band_key(frame_key, first / DITHER_BAND_ROWS);
         let mut cur = vec![0.0f32; w + 2];
-        let mut rng = band_stream(frame_key, first / DITHER_BAND_ROWS);
         let mut band_out = Vec::new();
         'rows: for ly in first.saturating_sub(DITHER_WARM_UP_ROWS)..(first + DITHER_BAND_ROWS).min(h) {
             if ly == first {
@@ -236,35 +236,36 @@ fn reference_select(seed: u64, frame: u64, w: u32, h: u32, weights: &[f32], ages
             let ltr = (ly % 2 == 0) != flip;
             let row = &s.prio[y * w..(y + 1) * w];
             let mut next = vec![0.0f32; w + 2];
-            let mut x = if ltr { ox } else { (ox + w - 1) % w };
-            let mut carry = 0.0f32;
+            // The value reached at the pixel scanned before, and whether it was picked.
+            let mut before: Option<(f32, bool)> = None;
             for step in 0..w {
                 let lx = if ltr { step } else { w - 1 - step };
+                let x = (lx + ox) % w;
                 let q = (row[x] * scale).min(1.0);
-                let v = q + cur[lx + 1] + carry;
-                rng ^= rng >> 12;
-                rng ^= rng << 25;
-                rng ^= rng >> 27;
-                let hsh = rng.wrapping_mul(0x2545_F491_4F6C_DD1D);
-                let threshold = THRESHOLD_LO + (THRESHOLD_HI - THRESHOLD_LO) * unit(hsh);
-                let e = if q > 0.0 && (v >= threshold || q >= 1.0) {
-                    let h2 = mix64(hsh);
-                    band_out.push(PixelRequest { x: x as u32, y: y as u32, sx: inside_pixel(x as u32, unit(h2)), sy: inside_pixel(y as u32, unit(h2 << 24)), point: crate::render_cache::NO_POINT });
-                    if ly >= first && band_out.len() == budget {
+                let a = q + cur[lx + 1];
+                // v = a + 7/16 (v_before - picked_before), as one fused multiply-add.
+                let v = match before {
+                    None => a,
+                    Some((vb, picked)) => (7.0f32 / 16.0).mul_add(vb, if picked { a - 7.0 / 16.0 } else { a }),
+                };
+                let idx = (ly * w + lx) as u32;
+                let threshold = (fmix32(key ^ idx) >> 8) as f32 / (1u32 << 24) as f32;
+                let picked = q > 0.0 && (v >= threshold || q >= 1.0);
+                if picked && ly >= first {
+                    band_out.push(pick_at(key, idx, x, y));
+                    if band_out.len() == budget {
                         break 'rows;
                     }
-                    v - 1.0
-                } else {
-                    v
-                };
-                carry = e * (7.0 / 16.0);
+                }
+                before = Some((v, picked));
+                let e = if picked { v - 1.0 } else { v };
                 let (ahead, behind) = if ltr { (lx + 2, lx) } else { (lx, lx + 2) };
                 next[behind] += e * (3.0 / 16.0);
                 next[lx + 1] += e * (5.0 / 16.0);
                 next[ahead] += e * (1.0 / 16.0);
-                x = if ltr { (x + 1) % w } else { (x + w - 1) % w };
             }
-            next[if ltr { w } else { 1 }] += carry;
+            let (vb, picked) = before.expect("a row has a pixel");
+            next[if ltr { w } else { 1 }] += (if picked { vb - 1.0 } else { vb }) * (7.0 / 16.0);
             next[1] += next[0];
             next[w] += next[w + 1];
             next[0] = 0.0;
@@ -311,5 +312,32 @@ fn select_equals_the_plain_reference_bit_for_bit() {
             let want = reference_select(case, frame, w, h, &weights, &ages, &cfg, budget);
             assert_eq!(out, want, "case {case} ({w}x{h}), frame {frame}, budget {budget}");
         }
+    }
+}
+
+/// The plain dithering (the path of CPUs without AVX2 and FMA) picks what the path this CPU
+/// takes picks, pair of bands by pair of bands, with the budget cutting either band.
+#[test]
+fn plain_and_vector_dithering_agree() {
+    let mut rng = Rng::new(99);
+    for case in 0..40 {
+        let (w, h) = (1 + rng.below(300), 65 + rng.below(100));
+        let prio: Vec<f32> = (0..w * h).map(|_| if rng.chance(0.2) { 0.0 } else if rng.chance(0.05) { 1.0 } else { rng.unit() * 0.3 }).collect();
+        let scan = FrameScan { w, h, ox: rng.below(w), oy: rng.below(h), flip: rng.chance(0.5), frame_key: rng.next_u64(), scale: 0.2 + rng.unit() * 3.0, budget: 1 + rng.below(w * h / 3 + 1) };
+        let run = |plain: bool| {
+            let (mut x, mut y) = (DitherBand::new(w), DitherBand::new(w));
+            if plain {
+                dither_pair_rows(&scan, &prio, 0, &mut x, Some(&mut y), chain, |p, q| {
+                    chain(p.0, p.1, p.2, p.3);
+                    chain(q.0, q.1, q.2, q.3);
+                });
+            } else {
+                dither_pair(&scan, &prio, 0, &mut x, Some(&mut y));
+            }
+            (x.picks, y.picks, x.err_cur, y.err_cur)
+        };
+        let (plain, fast) = (run(true), run(false));
+        assert!(!plain.0.is_empty() || !plain.1.is_empty(), "case {case}: no picks at all");
+        assert_eq!(plain, fast, "case {case} ({w}x{h})");
     }
 }

@@ -20,7 +20,7 @@ pub mod memory;
 mod output;
 mod progress;
 pub mod pick;
-mod requests;
+pub mod requests;
 mod settings;
 pub mod split;
 

@@ -12,6 +12,7 @@ use crate::sampling::PixelRequest;
 use edgepoint_proto as pb;
 use edgepoint_scene::camera::CameraFrame;
 use glam::Vec3;
+use rayon::prelude::*;
 
 #[derive(Debug, Clone, Copy)]
 struct Slot {
@@ -78,6 +79,11 @@ impl RequestRing {
         id
     }
 
+    /// The id the next [`Self::push`] returns.
+    pub fn next_id(&self) -> u64 {
+        self.next_id
+    }
+
     /// What request `id` was, unless its slot has been reused since.
     #[inline]
     pub fn get(&self, id: u64) -> Option<RequestInfo> {
@@ -119,24 +125,35 @@ pub fn build_batches(
     out: &mut Vec<pb::RequestBatch>,
 ) {
     let batches = picks.len().div_ceil(spec.batch_size.max(1));
-    for b in 0..batches {
-        let requests = picks
-            .iter()
-            .skip(b)
-            .step_by(batches)
-            .map(|p| {
-                let (origin, dir) = cam.ray(p.sx, p.sy);
-                let id = ring.push([p.x, p.y], dir, p.point);
-                pb::ShadeRequest {
-                    id,
-                    pixel_x: p.x,
-                    pixel_y: p.y,
-                    origin: Some(origin.into()),
-                    direction: Some(dir.into()),
-                    ..Default::default()
-                }
-            })
-            .collect();
+    // The rays of the batches in parallel (a ray per pick is most of the work), then the
+    // ring in order: batch b's requests take the ids after those of the batches before it.
+    let first_id = ring.next_id();
+    let (base, extra) = (picks.len() / batches.max(1), picks.len() % batches.max(1));
+    let start = |b: usize| first_id + (b * base + b.min(extra)) as u64;
+    let mut all: Vec<Vec<pb::ShadeRequest>> = Vec::with_capacity(batches);
+    (0..batches)
+        .into_par_iter()
+        .map(|b| {
+            picks
+                .iter()
+                .skip(b)
+                .step_by(batches)
+                .enumerate()
+                .map(|(j, p)| {
+                    let (origin, dir) = cam.ray(p.sx, p.sy);
+                    pb::ShadeRequest { id: start(b) + j as u64, pixel_x: p.x, pixel_y: p.y, origin: Some(origin.into()), direction: Some(dir.into()), ..Default::default() }
+                })
+                .collect()
+        })
+        .collect_into_vec(&mut all);
+    for (b, requests) in all.iter().enumerate() {
+        for (r, p) in requests.iter().zip(picks.iter().skip(b).step_by(batches)) {
+            let dir = r.direction.map_or(Vec3::ZERO, Vec3::from);
+            let id = ring.push([p.x, p.y], dir, p.point);
+            debug_assert_eq!(id, r.id);
+        }
+    }
+    for requests in all {
         *seed = mix64(*seed);
         let whole = pb::RequestBatch {
             batch_id: *next_batch_id,
