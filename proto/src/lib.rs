@@ -19,6 +19,7 @@ mod source;
 pub use source::*;
 
 pub mod auth;
+pub mod heap;
 pub mod linear_frame;
 pub mod logging;
 pub mod metrics_http;

@@ -19,6 +19,7 @@ const MAX_STREAMS_PER_CONNECTION: u32 = 64;
 
 fn main() -> std::process::ExitCode {
     edgepoint_proto::logging::init("info");
+    edgepoint_proto::heap::keep_freed_memory();
     let cli = ServerArgs::parse();
     if !(cli.points_per_pixel.is_finite() && (0.25..=64.0).contains(&cli.points_per_pixel)) {
         eprintln!("error: --points-per-pixel must be in [0.25, 64], got {}", cli.points_per_pixel);

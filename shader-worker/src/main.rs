@@ -17,6 +17,7 @@ const DRAIN_GRACE: Duration = Duration::from_secs(10);
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     edgepoint_proto::logging::init("info");
+    edgepoint_proto::heap::keep_freed_memory();
     let args = WorkerArgs::parse();
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let tls = match (&args.tls_cert, &args.tls_key, &args.tls_client_ca) {
