@@ -24,3 +24,16 @@ pub fn process_cpu_ms() -> f64 {
     unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
     ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
 }
+
+/// Median milliseconds of `f` by `clock` over `iterations` runs, after two warm-up runs.
+pub fn median_ms(iterations: usize, clock: fn() -> f64, f: &mut dyn FnMut()) -> f64 {
+    let mut v = Vec::with_capacity(iterations);
+    for i in 0..iterations + 2 {
+        let t0 = clock();
+        f();
+        if i >= 2 {
+            v.push(clock() - t0);
+        }
+    }
+    crate::stats::median(&v)
+}

@@ -12,7 +12,7 @@
 //! server's encode, the viewer's decode and tone mapping (against decoding QOI), bytes per
 //! frame; and EXR writes of the decoded frame with each lossless compression (wall clock:
 //! the `exr` crate compresses blocks on its own threads).
-use crate::clock::{thread_cpu_ms, wall_ms};
+use crate::clock::{median_ms, thread_cpu_ms, wall_ms};
 use crate::inprocess::{jittered_picks, reconstructed_frame, Staged};
 use crate::stats::median;
 use anyhow::{bail, Context, Result};
@@ -119,17 +119,7 @@ mod baseline {
 /// The measurements of one frame on one pool.
 fn measure(frame: &[Vec3], w: u32, h: u32, iterations: usize, cpu: bool) -> Result<BTreeMap<&'static str, f64>> {
     let clock: fn() -> f64 = if cpu { thread_cpu_ms } else { wall_ms };
-    let time = |f: &mut dyn FnMut()| -> f64 {
-        let mut v = Vec::with_capacity(iterations);
-        for i in 0..iterations + 2 {
-            let t0 = clock();
-            f();
-            if i >= 2 {
-                v.push(clock() - t0);
-            }
-        }
-        median(&v)
-    };
+    let time = |f: &mut dyn FnMut()| -> f64 { median_ms(iterations, clock, f) };
     let mut m = BTreeMap::new();
     let mut rgb = Vec::new();
     let mut enc = FrameEncoder::new();

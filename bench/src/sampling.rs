@@ -11,9 +11,8 @@
 //! picks at 512²). The baseline, in the same process on the same thread, is one streaming
 //! pass computing every pixel's priority into a buffer (the first of `select`'s passes), so
 //! `over_priority_pass` says how many such passes the whole step costs.
-use crate::clock::{thread_cpu_ms, wall_ms};
+use crate::clock::{median_ms as time, thread_cpu_ms, wall_ms};
 use crate::inprocess::{jittered_picks, reconstructed_frame, Staged};
-use crate::stats::median;
 use anyhow::{bail, Result};
 use edgepoint_server::rng::mix64;
 use edgepoint_server::sampling::{aim_at_points, priority, PixelRequest, Sampler, SamplingConfig};
@@ -48,19 +47,6 @@ pub struct SamplingArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Median ms of `f` over `iterations` runs after two warm-up runs.
-fn time(iterations: usize, clock: fn() -> f64, f: &mut dyn FnMut()) -> f64 {
-    let mut v = Vec::with_capacity(iterations);
-    for i in 0..iterations + 2 {
-        let t0 = clock();
-        f();
-        if i >= 2 {
-            v.push(clock() - t0);
-        }
-    }
-    median(&v)
 }
 
 pub fn run(args: SamplingArgs) -> Result<()> {

@@ -154,8 +154,8 @@ impl DitherBand {
 }
 
 /// Logical rows per band of the dithering. The error diffusion is serial along a band (a
-/// chain of dependent additions per pixel: 8 ns a pixel, 2 ms for a 512² frame), so bands
-/// run in parallel.
+/// chain of a compare, a select and a multiply-add per pixel), so bands run in parallel,
+/// in pairs whose chains share the instructions ([`dither_pair_rows`]).
 pub const DITHER_BAND_ROWS: usize = 64;
 /// Rows of the band before that a band dithers first without keeping their picks. Started
 /// from zero error, a band's first rows pick too often where priorities are low: the
@@ -512,8 +512,8 @@ unsafe fn chain_avx2(a: &[f32], b: &[f32], t: &[f32], v: &mut [f32]) {
     // instructions need no merging of the upper lanes) and are never read.
     let ahead = _mm_set1_ps(AHEAD);
     let mut x = _mm_set1_ps(a[0]);
-    for i in 0..w - 1 {
-        v[i] = _mm_cvtss_f32(x);
+    for (i, v) in v[..w - 1].iter_mut().enumerate() {
+        *v = _mm_cvtss_f32(x);
         // SAFETY: i + 1 < w, the length of every slice (asserted above).
         let (an, bn, ti) = unsafe { (_mm_load_ss(a.as_ptr().add(i + 1)), _mm_load_ss(b.as_ptr().add(i + 1)), _mm_load_ss(t.as_ptr().add(i))) };
         // All ones where x >= t (ordered: no NaN reaches here).
@@ -572,7 +572,7 @@ impl DitherBand {
     fn prepare(&mut self, scan: &FrameScan, prio: &[f32], key: u32, ly: usize) -> BandRow {
         let &FrameScan { w, h, ox, oy, flip, scale, .. } = scan;
         let y = (ly + oy) % h;
-        let ltr = (ly % 2 == 0) != flip;
+        let ltr = ly.is_multiple_of(2) != flip;
         let row = &prio[y * w..(y + 1) * w];
         let base = (ly * w) as u32;
         // In logical order (logical column lx is physical column (lx + ox) % w), then
