@@ -204,6 +204,9 @@ pub fn run(args: EncodeArgs) -> Result<()> {
     if args.iterations == 0 {
         bail!("--iterations must be at least 1");
     }
+    if let Some(s) = args.sizes.iter().find(|&&s| !(8..=8192).contains(&s)) {
+        bail!("--sizes {s}: frame sizes must be in [8, 8192]");
+    }
     if !(args.density > 0.0 && args.density <= 1.0) {
         bail!("--density {} is not in (0, 1]", args.density);
     }

@@ -59,6 +59,9 @@ pub fn run(args: SamplingArgs) -> Result<()> {
     if let Some(s) = args.sparseness.iter().find(|s| !(s.is_finite() && **s >= 1.0)) {
         bail!("--sparseness {s} is not a number ≥ 1");
     }
+    if let Some(s) = args.sizes.iter().find(|&&s| !(8..=8192).contains(&s)) {
+        bail!("--sizes {s}: frame sizes must be in [8, 8192]");
+    }
     if args.batch_size == 0 {
         bail!("--batch-size must be at least 1");
     }
