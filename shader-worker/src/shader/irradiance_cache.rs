@@ -11,7 +11,9 @@
 //! Eᵢ + (nᵢ × n)·∇r + (p − pᵢ)·∇t, and averaged by weight; records "in front" of p are
 //! skipped (Ward's test). R is clamped to [Rmax / 16, Rmax] with Rmax = cell / a, so a
 //! record serves no farther than one grid cell and a lookup visits 27 cells; and to
-//! E / |∇t E| (Křivánek et al. 2006's gradient limit), so extrapolation stays positive.
+//! E / |∇t E| (Křivánek et al. 2006's gradient limit), so extrapolation stays positive;
+//! where that limit falls below Rmin the gradients are scaled down instead
+//! ([`limit_gradients`]), so no lookup moves a record's irradiance by more than a·E per gradient.
 //!
 //! Bounded memory: at most [`MAX_RECORDS`] records in a ring (the oldest is dropped), a
 //! number of this module, never one an input gives.
@@ -175,6 +177,34 @@ pub fn gather(frame: &Frame, rays: u32, rng: &mut Rng, mut trace: impl FnMut(Vec
     Gathered { e: sum * scale, r: r_harm, grad_r: grad_r.map(|g| g * scale), grad_t }
 }
 
+/// Bounds each channel's gradients so that a lookup the record serves (distance d < a·R,
+/// and √(1 − n·nᵢ) < a, so |nᵢ × n| < √2·a) moves its irradiance by at most a·Eᵢ per
+/// gradient: |∇t| ≤ Eᵢ / R and |∇r| ≤ Eᵢ / √2, a gradient above its bound scaled down to it.
+///
+/// Why: the translation bound is Křivánek et al.'s R ≤ E / |∇t E|, which `insert` applies
+/// to R — but R is then raised to Rmin, and where a record's hemisphere rays hit a wall at
+/// almost no distance (a crease, the foot of a box) the estimated ∇t is so large that
+/// E / |∇t| lies far below Rmin; extrapolating such a gradient over a·Rmin made pixels 100×
+/// too bright (fireflies of 3–13 where the floor is 0.1, seen along `cornell`'s creases).
+/// The rotation estimate weights each ray by tan θ, unbounded at the horizon, so one grazing
+/// ray can make it as large.
+fn limit_gradients(e: Vec3, r: f32, grad_r: [Vec3; 3], grad_t: [Vec3; 3]) -> ([Vec3; 3], [Vec3; 3]) {
+    let limit = |g: Vec3, bound: f32| {
+        let len = g.length();
+        if len > bound && len > 0.0 {
+            g * (bound.max(0.0) / len)
+        } else {
+            g
+        }
+    };
+    let mut out = (grad_r, grad_t);
+    for c in 0..3 {
+        out.0[c] = limit(grad_r[c], e[c] / std::f32::consts::SQRT_2);
+        out.1[c] = limit(grad_t[c], e[c] / r);
+    }
+    out
+}
+
 struct State {
     settings: Option<CacheSettings>,
     /// The object placements the records were made under (empty: none yet).
@@ -312,6 +342,7 @@ impl IrradianceCache {
         let r = if r.is_nan() { r_max } else { r.max(r_min) };
         let finite = |a: &[Vec3; 3]| a.iter().all(|v| v.is_finite());
         let (grad_r, grad_t) = if finite(&g.grad_r) && finite(&g.grad_t) { (g.grad_r, g.grad_t) } else { ([Vec3::ZERO; 3], [Vec3::ZERO; 3]) };
+        let (grad_r, grad_t) = limit_gradients(g.e, r, grad_r, grad_t);
         let rec = Record { p, n, e: g.e, r, grad_r, grad_t, object };
         if !(g.e.is_finite() && p.is_finite() && n.is_finite()) {
             return rec;
@@ -400,6 +431,49 @@ mod tests {
             }
             assert!((gr.y as f64 - rot).abs() < 0.1 * rot.abs().max(0.1), "rotation at {x0}, {h}: {} vs {rot}", gr.y);
         }
+    }
+
+    /// A record whose estimated gradients are far too large (hemisphere rays hitting a wall
+    /// at almost no distance: E / |∇t| far below Rmin) extrapolates by at most a·E per
+    /// gradient at every point it serves, on random cases; gradients within the bounds are
+    /// kept as they are.
+    #[test]
+    fn extrapolation_stays_within_a_of_the_record_whatever_its_gradients() {
+        let cache = IrradianceCache::new((Vec3::ZERO, Vec3::splat(32.0)));
+        let scene = Scene { objects: vec![], ..edgepoint_scene::builtin::load("cornell").unwrap() };
+        let mut rng = Rng::new(5, 9);
+        let mut served = 0;
+        for case in 0..200 {
+            let a = 0.05 + 0.3 * rng.next_f32();
+            let settings = CacheSettings { error: a, rays: 64, max_depth: 2 };
+            let t = cache.sync(&scene, &[], settings);
+            let (r_min, _) = cache.radius_range(a);
+            let e = Vec3::new(0.1, 0.5, 2.0) * (0.5 + rng.next_f32());
+            let mut big = |s: f32| Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 0.0) * s;
+            let scale = if case % 2 == 0 { 1e4 } else { 1e-3 };
+            let g = Gathered { e, r: r_min * 1e-3, grad_r: [big(scale), big(scale), big(scale)], grad_t: [big(scale), big(scale), big(scale)] };
+            let p0 = Vec3::splat(10.0) + Vec3::new(rng.next_f32(), 0.0, rng.next_f32());
+            let rec = cache.insert(&t, p0, Vec3::Z, 0, &g);
+            assert_eq!(rec.r, r_min, "R raised to Rmin");
+            if scale < 1.0 {
+                assert_eq!((rec.grad_r, rec.grad_t), (g.grad_r, g.grad_t), "small gradients kept");
+            }
+            for _ in 0..50 {
+                // A point and normal the record serves: d/R + √(1 − n·nᵢ) < a.
+                let d = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 0.0).normalize_or_zero() * rec.r * a * rng.next_f32();
+                let tilt = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 0.0) * a * 1.4;
+                let n = (Vec3::Z + tilt).normalize();
+                if rec.weight(p0 + d, n) <= 1.0 / a {
+                    continue;
+                }
+                served += 1;
+                let x = rec.extrapolate(p0 + d, n);
+                for c in 0..3 {
+                    assert!((x[c] - e[c]).abs() <= 2.0 * a * e[c] * 1.0001, "case {case}: channel {c}: {} from {} at a = {a}", x[c], e[c]);
+                }
+            }
+        }
+        assert!(served > 2000, "{served}");
     }
 
     #[test]
