@@ -9,6 +9,9 @@
 //!   passes), accumulated per pixel; at each time point, the mean of every sample received
 //!   (pixels without one are black). The workers load the scene before its time starts.
 //!
+//! Each renderer (and the reference, when it is not cached) runs on workers started for it,
+//! so both start cold: neither finds the other's irradiance records.
+//!
 //! The verdict says whether edge-and-point is ahead (higher PSNR) at every time point.
 //!
 //! Where each renderer's last image is wrong: the squared error (sRGB, as the PSNR counts it)
@@ -98,23 +101,31 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
         Some(c) => c.apply(&scene.camera).map_err(|e| anyhow::anyhow!("--camera: {e}"))?,
         None => scene.camera,
     };
-    let cluster = start_cluster(a)?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    // Each render gets workers of its own: a worker keeps what it learnt of a scene (the
+    // `gi` shader's irradiance records), so workers shared with an earlier render would
+    // start the later one warm — with `cache_rays=1024` the progressive renderer, run first,
+    // spent its first 10 s making the records the session then found made.
     rt.block_on(async {
         let spp = a.reference_spp.unwrap_or(DEFAULT_CONVERGE_REFERENCE_SPP);
         let (reference, reference_cached) = {
+            let cluster = start_cluster(a)?;
             let dispatcher = open_dispatcher(&cluster, &source)?;
             converged_reference(&dispatcher, a, &source, &camera, spp).await?
         };
         let reference = reference.pixels;
 
         tracing::info!("converge: progressive full frames for {} s", args.seconds);
-        let dispatcher = open_dispatcher(&cluster, &source)?;
-        let (progressive, progressive_image, passes) = progressive_run(&dispatcher, a, &camera, &points, &reference).await?;
-        drop(dispatcher);
+        let (progressive, progressive_image, passes) = {
+            let cluster = start_cluster(a)?;
+            let dispatcher = open_dispatcher(&cluster, &source)?;
+            progressive_run(&dispatcher, a, &camera, &points, &reference).await?
+        };
 
         tracing::info!("converge: edge-and-point session for {} s", args.seconds);
+        let cluster = start_cluster(a)?;
         let (epr, epr_image, frames) = session_run(&cluster, &args, &source, &points, &reference).await?;
+        drop(cluster);
 
         let behind: Vec<f64> = points.iter().zip(epr.iter().zip(&progressive)).filter(|(_, (e, p))| e.psnr_db <= p.psnr_db).map(|(&t, _)| t).collect();
         let verdict = if behind.is_empty() {

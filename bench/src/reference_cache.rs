@@ -55,6 +55,11 @@ impl RefCache {
             cam.fov_y_degrees,
             p.join(",")
         );
+        // The shader's revision (above 1 only, so keys made before revisions existed stay
+        // valid for the shaders that have not changed since).
+        if let Some(r) = edgepoint_proto::shaders::shader(shader).map(|s| s.revision).filter(|&r| r > 1) {
+            desc += &format!("|rev{r}");
+        }
         if !state.is_empty() {
             desc += "|";
             desc += state;

@@ -24,6 +24,10 @@ pub struct ShaderInfo {
     pub name: &'static str,
     pub help: &'static str,
     pub params: &'static [ShaderParam],
+    /// Raised whenever a change alters the images the shader makes with the same
+    /// parameters (a fix, a new estimator): cached converged references carry it in their
+    /// key, so a reference rendered before the change is not compared with images after it.
+    pub revision: u32,
 }
 
 /// The shader an empty `start.shader` means.
@@ -84,6 +88,7 @@ pub const SHADERS: &[ShaderInfo] = &[
         name: "direct",
         help: "point and polygonal area lights with shadow rays (or exact area-light visibility), Lambertian, ambient (paper 000)",
         params: &[SHADOW_RAYS, AMBIENT, AREA],
+        revision: 1,
     },
     ShaderInfo {
         name: "glossy",
@@ -94,6 +99,7 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "rays", min: 1.0, max: 256.0, default: 4.0, integer: true, help: "BSDF-sampled reflection rays K at the first hit (one per deeper hit)" },
             ShaderParam { name: "max_depth", min: 1.0, max: 16.0, default: 3.0, integer: true, help: "reflection bounces followed (1: reflections show direct light and ambient only)" },
         ],
+        revision: 1,
     },
     ShaderInfo {
         name: "gi",
@@ -104,7 +110,11 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "cache", min: 0.0, max: 1.0, default: 1.0, integer: true, help: "1: irradiance cache for the diffuse indirect term of Lambertian first hits; 0: path-trace it" },
             ShaderParam { name: "cache_error", min: 0.02, max: 1.0, default: 0.15, integer: false, help: "Ward's accuracy a: a record serves points of weight above 1/a (smaller: more records, less blur)" },
             ShaderParam { name: "cache_rays", min: 16.0, max: 4096.0, default: 256.0, integer: true, help: "hemisphere rays per irradiance record (M x N strata, N ~ pi M)" },
+            ShaderParam { name: "cache_max_rays", min: 16.0, max: 65536.0, default: 1024.0, integer: true, help: "rays a record grows to while it is used: once it has served as many lookups as it holds rays, it gathers cache_rays more (a still view's records lose their noise as its samples accumulate); at most cache_rays: no refinement" },
         ],
+        // 2: the irradiance cache's gradients bounded (records along creases made fireflies).
+        // 3: records refined while they are used (`cache_max_rays`).
+        revision: 3,
     },
     ShaderInfo {
         name: "hybrid",
@@ -116,6 +126,7 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "max_depth", min: 0.0, max: 16.0, default: 5.0, integer: true, help: "specular bounces traced (mirror reflection; glass splits into reflection and refraction); 0: delta surfaces show no scene" },
             ShaderParam { name: "conserve", min: 0.0, max: 1.0, default: 1.0, integer: true, help: "1: the K VPLs share the reflected flux of every lit element in proportion to their own (the paper's intensities proportional to the weights; no indirect energy lost); 0: each carries its own element's flux (exact one bounce when K covers every lit element)" },
         ],
+        revision: 1,
     },
 ];
 

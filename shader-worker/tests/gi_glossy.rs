@@ -214,7 +214,7 @@ fn a_moved_object_invalidates_the_records_that_see_it() {
     let s = scene(vec![object("floor", quad(0.0, 10.0, true), 0.5), ball], vec![], 0.0);
     let loaded = LoadedScene::build(s, "move".into(), &NoProgress);
     let cache = &loaded.irradiance;
-    let settings = CacheSettings { error: 0.3, rays: 64, max_depth: 3 };
+    let settings = CacheSettings { error: 0.3, rays: 64, max_depth: 3, max_rays: 64 };
     let mut transforms = loaded.default_transforms();
     let t = cache.sync(&loaded.scene, &transforms, settings);
     let g = Gathered { e: Vec3::ONE, r: 1.0, grad_r: [Vec3::ZERO; 3], grad_t: [Vec3::ZERO; 3] };
@@ -226,7 +226,7 @@ fn a_moved_object_invalidates_the_records_that_see_it() {
         (Vec3::new(5.0, 1.0, 0.0), Vec3::X, 0),         // facing away, to the side
     ];
     for (p, n, o) in records {
-        cache.insert(&t, p, n, o, &g);
+        cache.insert(&t, p, n, o, &g, p, n);
     }
     assert_eq!(cache.stats().records, 5);
     transforms[1] = Affine3A::from_translation(Vec3::new(1.0, 1.0, 0.0));

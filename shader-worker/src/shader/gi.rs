@@ -9,21 +9,24 @@
 //!
 //! With `cache` on, a Lambertian first hit takes its diffuse indirect term, albedo/π × E,
 //! from the worker's [`super::irradiance_cache`]: E interpolated from records, or gathered
-//! into a new record from `cache_rays` hemisphere paths when no record is valid there.
+//! into a new record from `cache_rays` hemisphere paths when no record is valid there; a
+//! record that has served as many lookups as it holds rays gathers `cache_rays` more (the
+//! lookup that finds it so pays for them), up to `cache_max_rays`, so a still view's
+//! records lose their noise as its samples accumulate.
 //! Only first hits use the cache (the paper's shader caches what the camera sees; deeper
 //! vertices are path-traced).
 //!
 //! Split shading: a part samples its own lights at the first hit; the rest of the path
 //! (and the irradiance cache) is part 0's.
 use super::hit::{primary, Surface};
-use super::irradiance_cache::{gather, CacheSettings, Ticket};
+use super::irradiance_cache::{gather, CacheSettings, Gathered, Ticket};
 use super::lights::{add_direct_light, LightQuery};
 use super::{finish, RayRequest, Shaded};
 use crate::bsdf_rays::{light_pdf, nearest_area_light, power_heuristic};
 use crate::bvh::Instances;
 use crate::loaded::LoadedScene;
 use crate::rng::Rng;
-use edgepoint_scene::material::{Scatter, Scattering};
+use edgepoint_scene::material::{Frame, Scatter, Scattering};
 use edgepoint_proto::split::Part;
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -41,12 +44,14 @@ pub struct GiParams {
     pub cache_error: f32,
     /// Hemisphere rays per record (`cache_rays`).
     pub cache_rays: u32,
+    /// Rays a record grows to by refinement (`cache_max_rays`).
+    pub cache_max_rays: u32,
 }
 
 impl GiParams {
     /// What the cache's records depend on.
     pub fn cache_settings(&self) -> CacheSettings {
-        CacheSettings { error: self.cache_error, rays: self.cache_rays, max_depth: self.max_depth }
+        CacheSettings { error: self.cache_error, rays: self.cache_rays, max_depth: self.max_depth, max_rays: self.cache_max_rays }
     }
 }
 
@@ -159,23 +164,33 @@ fn indirect_along(ctx: &Ctx, origin: Vec3, dir: Vec3, light_rng: &mut Rng, rng: 
 }
 
 /// Irradiance of the diffuse indirect term at a Lambertian first hit: from the cache, or
-/// gathered into a new record.
+/// gathered into a new record. A lookup that asks for its best record's refinement
+/// (`irradiance_cache`: once a record has served as many lookups as it holds rays) pays for
+/// it: one more gather of `cache_rays` rays at that record, merged into it.
 fn cached_irradiance(ctx: &Ctx, s: &Surface, ticket: &Ticket, rng: &mut Rng) -> Vec3 {
     let cache = &ctx.scene.irradiance;
     let n = s.sp.frame.n;
-    if let Some(e) = cache.lookup(ticket, s.h.position, n) {
+    if let Some((e, refine)) = cache.lookup_counted(ticket, s.h.position, n) {
+        if let Some(req) = refine {
+            let g = gather_at(ctx, &Frame::from_normal(req.n), req.origin, req.ng, rng);
+            cache.refine(ticket, &req, &g);
+        }
         return e;
     }
+    let g = gather_at(ctx, &s.sp.frame, s.origin, s.n, rng);
+    cache.insert(ticket, s.h.position, n, s.h.object, &g, s.origin, s.n);
+    g.e
+}
+
+/// `cache_rays` hemisphere paths around `frame.n` from `origin` (`ng`: the face's normal).
+fn gather_at(ctx: &Ctx, frame: &Frame, origin: Vec3, ng: Vec3, rng: &mut Rng) -> Gathered {
     let mut light_rng = Rng::new(rng.next_u64(), 0);
     let mut path_rng = Rng::new(rng.next_u64(), 1);
-    let origin = s.origin;
-    let g = gather(&s.sp.frame, ctx.p.cache_rays, rng, |dir| {
-        if dir.dot(s.n) <= 0.0 {
+    gather(frame, ctx.p.cache_rays, rng, |dir| {
+        if dir.dot(ng) <= 0.0 {
             // Below the face (a tilted shading normal): nothing arrives through the surface.
             return (Vec3::ZERO, f32::INFINITY);
         }
         indirect_along(ctx, origin, dir, &mut light_rng, &mut path_rng)
-    });
-    cache.insert(ticket, s.h.position, n, s.h.object, &g);
-    g.e
+    })
 }

@@ -73,6 +73,7 @@ impl ShaderSpec {
                 cache: whole("cache") == 1,
                 cache_error: p["cache_error"] as f32,
                 cache_rays: whole("cache_rays"),
+                cache_max_rays: whole("cache_max_rays"),
             })),
             Some("hybrid") => Ok(ShaderSpec::Hybrid(HybridParams {
                 shadow_rays: whole("shadow_rays"),
