@@ -15,6 +15,16 @@
 //! where that limit falls below Rmin the gradients are scaled down instead
 //! ([`limit_gradients`]), so no lookup moves a record's irradiance by more than a·E per gradient.
 //!
+//! Refinement: a record keeps the mean of its gathers (before R's clamp and the gradient
+//! bounds). Each lookup counts against the record of the highest weight; once a record has
+//! served as many lookups as it holds rays, the lookup asks for `rays` more
+//! ([`IrradianceCache::lookup_counted`]), and the merged gathers replace the record's values
+//! ([`IrradianceCache::refine`]), up to the settings' `max_rays`. So records grow in
+//! proportion to their use — a still view's records lose their noise as its samples
+//! accumulate (the irradiance no longer freezes at one gather's noise, which set the plateau
+//! of a still `gi` image) — and a record that serves few lookups costs no more than before.
+//! A gather costs about `rays` paths, so refinement adds at most one path per lookup.
+//!
 //! Bounded memory: at most [`MAX_RECORDS`] records in a ring (the oldest is dropped), a
 //! number of this module, never one an input gives.
 //!
@@ -36,7 +46,8 @@ use std::f32::consts::{PI, TAU};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::RwLock;
 
-/// The most records a cache holds (each about 130 bytes with its grid entry: ~8.5 MB).
+/// The most records a cache holds (each about 250 bytes with its gathers for refinement and
+/// its grid entry: ~16 MB).
 pub const MAX_RECORDS: usize = 1 << 16;
 /// Grid cells across the scene's bounding-box diagonal.
 const CELLS_ACROSS: f32 = 32.0;
