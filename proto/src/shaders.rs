@@ -110,7 +110,7 @@ pub const SHADERS: &[ShaderInfo] = &[
             ShaderParam { name: "cache", min: 0.0, max: 1.0, default: 1.0, integer: true, help: "1: irradiance cache for the diffuse indirect term of Lambertian first hits; 0: path-trace it" },
             ShaderParam { name: "cache_error", min: 0.02, max: 1.0, default: 0.15, integer: false, help: "Ward's accuracy a: a record serves points of weight above 1/a (smaller: more records, less blur)" },
             ShaderParam { name: "cache_rays", min: 16.0, max: 4096.0, default: 256.0, integer: true, help: "hemisphere rays per irradiance record (M x N strata, N ~ pi M)" },
-            ShaderParam { name: "cache_max_rays", min: 16.0, max: 65536.0, default: 1024.0, integer: true, help: "rays a record grows to while it is used: once it has served as many lookups as it holds rays, it gathers cache_rays more (a still view's records lose their noise as its samples accumulate); at most cache_rays: no refinement" },
+            ShaderParam { name: "cache_max_rays", min: 16.0, max: 65536.0, default: 1024.0, integer: true, help: "rays a record grows to while it is used: once it has served a quarter as many lookups as it holds rays, it gathers cache_rays more (a still view's records lose their noise as its samples accumulate); at most cache_rays: no refinement" },
         ],
         // 2: the irradiance cache's gradients bounded (records along creases made fireflies).
         // 3: records refined while they are used (`cache_max_rays`).

@@ -10,7 +10,7 @@
 //! With `cache` on, a Lambertian first hit takes its diffuse indirect term, albedo/π × E,
 //! from the worker's [`super::irradiance_cache`]: E interpolated from records, or gathered
 //! into a new record from `cache_rays` hemisphere paths when no record is valid there; a
-//! record that has served as many lookups as it holds rays gathers `cache_rays` more (the
+//! record that has served a quarter as many lookups as it holds rays gathers `cache_rays` more (the
 //! lookup that finds it so pays for them), up to `cache_max_rays`, so a still view's
 //! records lose their noise as its samples accumulate.
 //! Only first hits use the cache (the paper's shader caches what the camera sees; deeper
@@ -165,7 +165,7 @@ fn indirect_along(ctx: &Ctx, origin: Vec3, dir: Vec3, light_rng: &mut Rng, rng: 
 
 /// Irradiance of the diffuse indirect term at a Lambertian first hit: from the cache, or
 /// gathered into a new record. A lookup that asks for its best record's refinement
-/// (`irradiance_cache`: once a record has served as many lookups as it holds rays) pays for
+/// (`irradiance_cache`: once a record has served a quarter as many lookups as it holds rays) pays for
 /// it: one more gather of `cache_rays` rays at that record, merged into it.
 fn cached_irradiance(ctx: &Ctx, s: &Surface, ticket: &Ticket, rng: &mut Rng) -> Vec3 {
     let cache = &ctx.scene.irradiance;
