@@ -226,7 +226,7 @@ fn a_moved_object_invalidates_the_records_that_see_it() {
         (Vec3::new(5.0, 1.0, 0.0), Vec3::X, 0),         // facing away, to the side
     ];
     for (p, n, o) in records {
-        cache.insert(&t, p, n, o, &g, p, n);
+        cache.insert(&t, p, n, o, &g, n);
     }
     assert_eq!(cache.stats().records, 5);
     transforms[1] = Affine3A::from_translation(Vec3::new(1.0, 1.0, 0.0));

@@ -89,9 +89,6 @@ pub fn rest_frames(s: &SessionSettings) -> usize {
 /// Bound of [`rest_frames`] (4: the default 30 and 10 fps take 3).
 pub const MAX_REST_FRAMES: usize = 4;
 
-/// Requests per batch of a session's first round of requests (see `send_requests`).
-pub const FIRST_BATCH_SIZE: usize = 32;
-
 /// Frames the camera and the objects must have stayed still before the session samples at
 /// the workers' pace instead of its interactive budget (about a quarter of a second at 30
 /// fps: an orbit or a drag never pauses that long between frames).
@@ -807,17 +804,11 @@ impl FrameLoop {
     /// Builds ray batches for the picked pixels and submits them; returns requests sent.
     fn send_requests(&mut self) -> u32 {
         self.batches.clear();
-        // The session's first requests go out in small batches: a worker answers a batch
-        // whole, and a cold worker's first batches are its slowest (`gi` makes an
-        // irradiance record for nearly every request of a batch spread over the image), so
-        // the first image waits for the first batch to come back.
-        let first = self.counters.samples_requested == 0;
-        let batch_size = if first { (self.settings.batch_size as usize).min(FIRST_BATCH_SIZE) } else { self.settings.batch_size as usize };
         let spec = BatchSpec {
             epoch: self.epoch,
             shader: &self.shader,
             params: &self.shader_params,
-            batch_size,
+            batch_size: self.settings.batch_size as usize,
             parts: self.split.parts(),
         };
         build_batches(&self.picks, &self.cam_frame, &mut self.ring, &spec, &mut self.next_batch_id, &mut self.seed, &mut self.batches);

@@ -340,7 +340,7 @@ async fn stream_once(
     let mut progress_at = Instant::now();
     let mut busy_mark = Instant::now();
     let publish = |tuning: &Tuning| {
-        let size = tuning.sizer.size();
+        let size = tuning.sizer.next_size();
         state.in_flight_limit.store(tuning.limit.get(), Ordering::Relaxed);
         state.batch_size.store(size, Ordering::Relaxed);
         state.rate_bits.store(tuning.sizer.rate().unwrap_or(0.0).to_bits(), Ordering::Relaxed);
@@ -414,7 +414,7 @@ async fn stream_once(
                 continue;
             }
         }
-        if let Some(rest) = split(&mut q, tuning.sizer.size()) {
+        if let Some(rest) = split(&mut q, tuning.sizer.next_size()) {
             shared.outstanding_batches.fetch_add(1, Ordering::SeqCst);
             shared.push_retry(rest);
         }

@@ -172,13 +172,15 @@ fn cached_irradiance(ctx: &Ctx, s: &Surface, ticket: &Ticket, rng: &mut Rng) -> 
     let n = s.sp.frame.n;
     if let Some((e, refine)) = cache.lookup_counted(ticket, s.h.position, n) {
         if let Some(req) = refine {
-            let g = gather_at(ctx, &Frame::from_normal(req.n), req.origin, req.ng, rng);
+            // The rays start where the record's own did: its point lifted along the face.
+            let origin = req.p + req.ng * ctx.scene.epsilon;
+            let g = gather_at(ctx, &Frame::from_normal(req.n), origin, req.ng, rng);
             cache.refine(ticket, &req, &g);
         }
         return e;
     }
     let g = gather_at(ctx, &s.sp.frame, s.origin, s.n, rng);
-    cache.insert(ticket, s.h.position, n, s.h.object, &g, s.origin, s.n);
+    cache.insert(ticket, s.h.position, n, s.h.object, &g, s.n);
     g.e
 }
 

@@ -227,6 +227,12 @@ fn limit_gradients(e: Vec3, r: f32, grad_r: [Vec3; 3], grad_t: [Vec3; 3]) -> ([V
     out
 }
 
+/// Keeps the items of `v` whose `keep` is true (the same index).
+fn retain_where<T>(v: &mut Vec<T>, keep: &[bool]) {
+    let mut k = keep.iter();
+    v.retain(|_| *k.next().unwrap_or(&false));
+}
+
 struct State {
     settings: Option<CacheSettings>,
     /// The object placements the records were made under (empty: none yet).
@@ -234,7 +240,7 @@ struct State {
     version: u64,
     records: Vec<Record>,
     /// Per record (same index): the mean of its gathers before R's clamp and the gradient
-    /// bounds, and where they were gathered from (what refinement adds to).
+    /// bounds, and the face's normal they were gathered over (what refinement adds to).
     raw: Vec<Raw>,
     /// Per record: lookups it served best since it was made or last refined.
     uses: Vec<AtomicU32>,
@@ -243,12 +249,10 @@ struct State {
     grid: HashMap<[i32; 3], Vec<u32>>,
 }
 
-/// A record's gathers, merged (see [`Raw::merge`]), and its gathering point.
+/// A record's gathers, merged (see [`Raw::merge`]), and the face's normal at its point.
 #[derive(Debug, Clone, Copy)]
 struct Raw {
     g: Gathered,
-    /// Ray origin (the surface point lifted along the face's normal) and that normal.
-    origin: Vec3,
     ng: Vec3,
 }
 
@@ -271,16 +275,15 @@ impl Raw {
 }
 
 /// A lookup's request to refine the record that served it best (see the module docs): gather
-/// `rays` more hemisphere rays from `origin` around `n` and hand them to
-/// [`IrradianceCache::refine`].
+/// `rays` more hemisphere rays at `p` around `n` and hand them to [`IrradianceCache::refine`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Refine {
     index: usize,
     version: u64,
     pub p: Vec3,
     pub n: Vec3,
-    pub origin: Vec3,
-    /// The face's normal at the record (hemisphere rays below it see nothing).
+    /// The face's normal at the record (the rays start lifted along it; rays below it see
+    /// nothing).
     pub ng: Vec3,
     pub rays: u32,
 }
@@ -357,12 +360,9 @@ impl IrradianceCache {
             };
             let before = s.records.len();
             let keep: Vec<bool> = s.records.iter().map(|r| !sees(r)).collect();
-            let mut k = keep.iter();
-            s.records.retain(|_| *k.next().unwrap_or(&false));
-            let mut k = keep.iter();
-            s.raw.retain(|_| *k.next().unwrap_or(&false));
-            let mut k = keep.iter();
-            s.uses.retain(|_| *k.next().unwrap_or(&false));
+            retain_where(&mut s.records, &keep);
+            retain_where(&mut s.raw, &keep);
+            retain_where(&mut s.uses, &keep);
             stats.invalidated += (before - s.records.len()) as u64;
             // Rebuild the grid over the kept records (indices moved).
             s.grid.clear();
@@ -426,8 +426,7 @@ impl IrradianceCache {
         if r.rays < t.settings.max_rays {
             let uses = s.uses[i].fetch_add(1, Ordering::Relaxed) + 1;
             if uses == (r.rays / REFINE_USES_PER_RAYS).max(1) {
-                let raw = &s.raw[i];
-                refine = Some(Refine { index: i, version: s.version, p: r.p, n: r.n, origin: raw.origin, ng: raw.ng, rays: t.settings.rays });
+                refine = Some(Refine { index: i, version: s.version, p: r.p, n: r.n, ng: s.raw[i].ng, rays: t.settings.rays });
             }
         }
         Some((sum / wsum, refine))
@@ -443,7 +442,7 @@ impl IrradianceCache {
         let mut guard = self.state.write().unwrap_or_else(|p| p.into_inner());
         let (s, stats) = &mut *guard;
         let i = req.index;
-        if s.version != t.version || s.version != req.version || s.records.get(i).is_none_or(|r| r.p != req.p || r.n != req.n) {
+        if s.version != req.version || s.records.get(i).is_none_or(|r| r.p != req.p || r.n != req.n) {
             return;
         }
         let rays = s.records[i].rays;
@@ -475,13 +474,11 @@ impl IrradianceCache {
 
     /// Stores a record made from `g` at (p, n) on `object` (R clamped; module docs) and
     /// returns it; stored only if the ticket is current and the record finite.
-    /// `origin` and `ng`: where the hemisphere rays started and the face's normal there
-    /// (refinement gathers from them again).
-    #[allow(clippy::too_many_arguments)]
-    pub fn insert(&self, t: &Ticket, p: Vec3, n: Vec3, object: u32, g: &Gathered, origin: Vec3, ng: Vec3) -> Record {
+    /// `ng`: the face's normal at p (refinement gathers over it again).
+    pub fn insert(&self, t: &Ticket, p: Vec3, n: Vec3, object: u32, g: &Gathered, ng: Vec3) -> Record {
         let (r, grad_r, grad_t) = self.served(g, t.settings.error);
         let rec = Record { p, n, e: g.e, r, grad_r, grad_t, object, rays: t.settings.rays };
-        let raw = Raw { g: *g, origin, ng };
+        let raw = Raw { g: *g, ng };
         if !(g.e.is_finite() && p.is_finite() && n.is_finite()) {
             return rec;
         }
@@ -595,7 +592,7 @@ mod tests {
             let scale = if case % 2 == 0 { 1e4 } else { 1e-3 };
             let g = Gathered { e, r: r_min * 1e-3, grad_r: [big(scale), big(scale), big(scale)], grad_t: [big(scale), big(scale), big(scale)] };
             let p0 = Vec3::splat(10.0) + Vec3::new(rng.next_f32(), 0.0, rng.next_f32());
-            let rec = cache.insert(&t, p0, Vec3::Z, 0, &g, p0, Vec3::Z);
+            let rec = cache.insert(&t, p0, Vec3::Z, 0, &g, Vec3::Z);
             assert_eq!(rec.r, r_min, "R raised to Rmin");
             if scale < 1.0 {
                 assert_eq!((rec.grad_r, rec.grad_t), (g.grad_r, g.grad_t), "small gradients kept");
@@ -636,7 +633,7 @@ mod tests {
         let mut rng = Rng::new(11, 2);
         let p = Vec3::splat(10.0);
         let first = gather(&frame, 64, &mut rng, half_plane(x0, h));
-        cache.insert(&t, p, Vec3::Z, 0, &first, p, Vec3::Z);
+        cache.insert(&t, p, Vec3::Z, 0, &first, Vec3::Z);
         let mut es = vec![first.e.x as f64];
         let mut sum_e = first.e.x as f64;
         let mut gathers = 1;
@@ -653,7 +650,7 @@ mod tests {
             };
             let rays_before = 64 * gathers;
             assert_eq!(lookups, rays_before / REFINE_USES_PER_RAYS, "asked after a quarter as many lookups as rays");
-            assert_eq!((req.p, req.n, req.origin, req.ng, req.rays), (p, Vec3::Z, p, Vec3::Z, 64));
+            assert_eq!((req.p, req.n, req.ng, req.rays), (p, Vec3::Z, Vec3::Z, 64));
             let g = gather(&frame, 64, &mut rng, half_plane(x0, h));
             cache.refine(&t, &req, &g);
             sum_e += g.e.x as f64;
@@ -681,7 +678,7 @@ mod tests {
         assert!((e - exact_e).abs() < 4.0 * se, "refined: {e} vs {exact_e} (standard error {se})");
         // A request that outlived a change of settings does nothing.
         let t2 = cache.sync(&scene, &[], CacheSettings { max_rays: 128, ..settings });
-        cache.insert(&t2, p, Vec3::Z, 0, &first, p, Vec3::Z);
+        cache.insert(&t2, p, Vec3::Z, 0, &first, Vec3::Z);
         let req = (0..64).find_map(|_| cache.lookup_counted(&t2, p, Vec3::Z).unwrap().1).unwrap();
         cache.sync(&scene, &[], CacheSettings { max_rays: 256, ..settings });
         let before = cache.stats().refined;
@@ -696,7 +693,7 @@ mod tests {
         let scene = Scene { objects: vec![], ..edgepoint_scene::builtin::load("cornell").unwrap() };
         let t = cache.sync(&scene, &[], settings);
         let g = Gathered { e: Vec3::splat(2.0), r: 2.0, grad_r: [Vec3::ZERO; 3], grad_t: [Vec3::new(0.5, 0.0, 0.0); 3] };
-        let rec = cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g, Vec3::splat(10.0), Vec3::Y);
+        let rec = cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g, Vec3::Y);
         // R: 2 is inside [Rmax/16, Rmax] (cell 1.73, Rmax 8.7) and below E/|∇t| = 6/1.5.
         assert_eq!(rec.r, 2.0);
         let at = |dx: f32| cache.lookup(&t, Vec3::splat(10.0) + Vec3::new(dx, 0.0, 0.0), Vec3::Y);
@@ -709,7 +706,7 @@ mod tests {
         // A different setting empties the cache and stales the old ticket.
         let t2 = cache.sync(&scene, &[], CacheSettings { error: 0.3, ..settings });
         assert!(cache.lookup(&t2, Vec3::splat(10.0), Vec3::Y).is_none() && cache.lookup(&t, Vec3::splat(10.0), Vec3::Y).is_none());
-        cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g, Vec3::splat(10.0), Vec3::Y);
+        cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g, Vec3::Y);
         assert_eq!(cache.stats().records, 0, "a stale ticket stores nothing");
     }
 }
