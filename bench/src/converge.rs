@@ -124,7 +124,7 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
 
         tracing::info!("converge: edge-and-point session for {} s", args.seconds);
         let cluster = start_cluster(a)?;
-        let (epr, epr_image, frames) = session_run(&cluster, &args, &source, &points, &reference).await?;
+        let (epr, epr_image, frames, requested) = session_run(&cluster, &args, &source, &points, &reference).await?;
         drop(cluster);
 
         let behind: Vec<f64> = points.iter().zip(epr.iter().zip(&progressive)).filter(|(_, (e, p))| e.psnr_db <= p.psnr_db).map(|(&t, _)| t).collect();
@@ -155,12 +155,14 @@ pub fn run(args: ConvergeArgs) -> Result<()> {
             "worker_threads": a.worker_threads,
             "shader": a.shader,
             "shader_params": a.shader_params.iter().cloned().collect::<HashMap<_, _>>(),
+            "reference_params": crate::frame::reference_params(a),
             "seconds": args.seconds,
             "reference_spp": spp,
             "reference_cached": reference_cached,
             "time_points_s": points,
             "edge_and_point": series(&epr),
             "edge_and_point_frames": frames,
+            "edge_and_point_requested_per_pixel": requested as f64 / (a.width as f64 * a.height as f64),
             "progressive": series(&progressive),
             "progressive_passes": passes,
             "edge_and_point_error": hotspots(&epr_image, &reference, a.width as usize),
@@ -290,14 +292,15 @@ fn mean_image(sum: &[Vec3], count: &[u32], out: &mut [Vec3]) {
 }
 
 /// The edge-and-point session at rest: at each time point, the last frame received (black
-/// before the first). Returns the series, the last image and the frames received.
+/// before the first). Returns the series, the last image, the frames received and the
+/// requests the session issued (its samples are those of them it used).
 async fn session_run(
     cluster: &edgepoint_viewer::local::LocalCluster,
     args: &ConvergeArgs,
     source: &pb::SceneSource,
     points: &[f64],
     reference: &[Vec3],
-) -> Result<(Vec<Point>, Vec<Vec3>, u64)> {
+) -> Result<(Vec<Point>, Vec<Vec3>, u64, u64)> {
     let a = &args.scene;
     let n = a.width as usize * a.height as usize;
     let mut start = start_message(source, (a.width, a.height), (&a.shader, &a.shader_params), a.camera.as_ref(), args.pace.settings());
@@ -306,7 +309,7 @@ async fn session_run(
     let t0 = Instant::now();
     let end = t0 + Duration::from_secs_f64(args.seconds);
     let mut last: Option<pb::Frame> = None;
-    let (mut frames, mut samples) = (0u64, 0u64);
+    let (mut frames, mut samples, mut requested) = (0u64, 0u64, 0u64);
     let mut series = Vec::with_capacity(points.len());
     let shown = |f: Option<&pb::Frame>| -> Result<Vec<Vec3>> {
         Ok(match f {
@@ -339,6 +342,7 @@ async fn session_run(
                 }
                 frames += 1;
                 samples += u64::from(f.samples_used);
+                requested += u64::from(f.samples_requested);
                 last = Some(f);
             }
         }
@@ -347,7 +351,7 @@ async fn session_run(
     while series.len() < points.len() {
         series.push(measure("edge-and-point", points[series.len()], &image, reference, samples as f64 / n as f64));
     }
-    Ok((series, image, frames))
+    Ok((series, image, frames, requested))
 }
 
 #[cfg(test)]

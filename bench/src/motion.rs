@@ -310,7 +310,7 @@ async fn references(cluster: &edgepoint_viewer::local::LocalCluster, args: &Moti
     let endpoints = cluster.worker_addrs().iter().map(|w| format!("http://{w}")).collect();
     let pool = WorkerPool::new(endpoints)?;
     let dispatcher = pool.open(source.clone(), hash.clone());
-    let params: HashMap<String, f64> = a.shader_params.iter().cloned().collect();
+    let params = crate::frame::reference_params(a);
     let cache = RefCache::at(a.ref_cache.as_deref());
     let spp = reference_spp(args);
     let mut out = Vec::with_capacity(steps.len());

@@ -103,6 +103,7 @@ pub fn run(a: SpeedupArgs) -> Result<()> {
             worker_idle: a.worker_idle,
             shader: String::new(),
             shader_params: Vec::new(),
+            reference_params: Vec::new(),
             reference_spp: None,
             ref_cache: None,
             camera: None,

@@ -15,8 +15,35 @@
 //! epoch (no object moved in between). Otherwise the sample replaces the point as a new
 //! point of one sample: the count resets. Invalidated points (`invalidate_objects`, `clear`)
 //! leave the pool, and a slot reused for another sample starts from one.
+//!
+//! **Where to sample next at rest.** A progressive renderer gives every pixel the same
+//! number of samples. The squared error of a point's mean after n samples is σ²/n, so for a
+//! fixed number of samples the total error is least when n grows in proportion to σ
+//! (Neyman allocation): where the shading is noisy (soft shadows, indirect light in the
+//! corners, the luminaire's rim) more samples pay more. Each point keeps the spread of its
+//! samples (Welford's running sum of squared deviations of their [`tone`], a stand-in for
+//! the sRGB values the error is measured in), and [`RenderCache::update_noise_gains`] turns it into
+//! a per-pixel gain on the sampling priority of a still view (`sampling::Sampler::select_gained`).
+//! One sample's spread is unknown and a few samples' is itself noisy, so each estimate is
+//! shrunk toward the image's mean variance by [`PRIOR_SAMPLES`] samples' worth.
 use super::{RenderCache, Sample, FLAG_HIT, FLAG_STALE, FLAG_VALID, NO_POINT};
 use glam::Vec3;
+use rayon::prelude::*;
+
+/// The prior's weight, in samples, in a point's variance estimate ([`RenderCache::update_noise_gains`]).
+pub const PRIOR_SAMPLES: f32 = 1.0;
+/// Gains are clamped to [1 / this, this]: one firefly sample makes a large spread, and a
+/// pixel whose samples have all agreed so far must still be visited.
+pub const MAX_GAIN: f32 = 8.0;
+
+/// What a point's spread is measured in: the mean over the channels of the square root of
+/// the colour clamped to [0, 1], close to the sRGB encoding the error is judged in (the
+/// same weight to dark and bright noise as the eye and the PSNR give) and cheap per sample.
+#[inline]
+pub fn tone(c: Vec3) -> f32 {
+    let c = c.clamp(Vec3::ZERO, Vec3::ONE);
+    (c.x.sqrt() + c.y.sqrt() + c.z.sqrt()) * (1.0 / 3.0)
+}
 
 /// A sample is of the point a pixel shows when their positions differ by at most this
 /// fraction of the point's view depth (for a background miss: of the unit direction). A
@@ -83,6 +110,12 @@ impl RenderCache {
         p.samples[i] = n;
         let shade = &mut p.shade[i];
         shade.color += (s.color - shade.color) / f32::from(n);
+        // Welford: the mean of the tones and the sum of squared deviations from it.
+        let y = tone(s.color);
+        let [mean, m2] = &mut p.spread[i];
+        let delta = y - *mean;
+        *mean += delta / f32::from(n);
+        *m2 += delta * (y - *mean);
         shade.born = self.frame;
         let (color, born) = (shade.color, shade.born);
         // The point image the next frame updates in place reads these from the pixel, not
@@ -104,6 +137,69 @@ impl RenderCache {
     /// Samples averaged into existing points since the cache was made.
     pub fn averaged(&self) -> u64 {
         self.averaged
+    }
+
+    /// Per pixel of the last frame's point image, the factor by which the noise of the point
+    /// it shows should raise its sampling priority (module doc: σ relative to the image's
+    /// root-mean-square σ, with each point's variance shrunk toward the image's mean by
+    /// [`PRIOR_SAMPLES`], clamped to [1/[`MAX_GAIN`], [`MAX_GAIN`]]). Pixels without a
+    /// point, with a stale one, or with a point of one sample get the prior's gain (1 when
+    /// they are the only ones). Returns whether there are gains ([`Self::noise_gains`]): not
+    /// while no point holds two samples, or none varies.
+    pub fn update_noise_gains(&mut self) -> bool {
+        let w = self.cfg.width as usize;
+        let (pool, points) = (&self.pool, &self.points);
+        // Pass 1: the raw variance estimates, and their sum and number (per row, then added
+        // in row order: the same gains whatever the threads' split).
+        let rows: Vec<(f64, u32)> = self
+            .gains
+            .par_chunks_mut(w.max(1))
+            .zip(points.point.par_chunks(w.max(1)))
+            .map(|(g, pt)| {
+                let (mut sum, mut count) = (0.0f64, 0u32);
+                for (g, &i) in g.iter_mut().zip(pt) {
+                    *g = -1.0;
+                    if i == NO_POINT {
+                        continue;
+                    }
+                    let i = i as usize;
+                    let n = pool.samples[i];
+                    if n >= 2 && pool.flags[i] & (FLAG_VALID | FLAG_STALE) == FLAG_VALID {
+                        // Stored as m2 and n - 1 together: pass 2 needs both.
+                        let v = pool.spread[i][1].max(0.0) / f32::from(n - 1);
+                        sum += f64::from(v);
+                        count += 1;
+                        *g = f32::from(n);
+                    }
+                }
+                (sum, count)
+            })
+            .collect();
+        let (sum, count) = rows.iter().fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        if count == 0 || !(sum > 0.0) {
+            return false;
+        }
+        let mean = (sum / f64::from(count)) as f32;
+        let prior = PRIOR_SAMPLES * mean;
+        let inv_rms = 1.0 / mean.sqrt();
+        // Pass 2: the shrunk estimates' σ over the image's.
+        self.gains.par_chunks_mut(w.max(1)).zip(points.point.par_chunks(w.max(1))).for_each(|(g, pt)| {
+            for (g, &i) in g.iter_mut().zip(pt) {
+                *g = if *g < 0.0 {
+                    1.0
+                } else {
+                    let m2 = pool.spread[i as usize][1].max(0.0);
+                    let v = (m2 + prior) / (*g - 1.0 + PRIOR_SAMPLES);
+                    (v.sqrt() * inv_rms).clamp(1.0 / MAX_GAIN, MAX_GAIN)
+                };
+            }
+        });
+        true
+    }
+
+    /// The gains of the last [`Self::update_noise_gains`] that returned true, one per pixel.
+    pub fn noise_gains(&self) -> &[f32] {
+        &self.gains
     }
 }
 

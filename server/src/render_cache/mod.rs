@@ -298,6 +298,9 @@ struct Pool {
     stamp: Vec<u64>,
     /// Samples of the same surface point averaged into `shade.color` (`converge.rs`).
     samples: Vec<u16>,
+    /// The spread of those samples (`converge.rs`, [`RenderCache::noise_gains`]): the mean of
+    /// their [`converge::tone`] and the sum of its squared deviations (Welford).
+    spread: Vec<[f32; 2]>,
 }
 
 /// Replacement bookkeeping of one pool region (slots `start..end`).
@@ -377,6 +380,8 @@ pub struct RenderCache {
     points: PointImage,
     weights: Vec<f32>,
     image: Vec<Vec3>,
+    /// Per pixel: the sampling gain of its point's noise ([`Self::update_noise_gains`]).
+    gains: Vec<f32>,
 }
 
 /// Inserts remembered between two reprojections of a still view (a frame asks for 1/64 of
@@ -402,14 +407,15 @@ impl RenderCache {
         use std::mem::size_of;
         let pixels = width as usize * height as usize;
         let capacity = capacity_for(pixels, points_per_pixel);
-        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8 + 2;
+        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8 + 2 + size_of::<[f32; 2]>();
         // Projections, the free lists and the oldest-first queues (reserved at 2 entries per
         // slot plus 64 per region).
         let per_point = pool + size_of::<Projected>() + 4 + 2 * size_of::<(u64, u32)>();
         let bands = height.div_ceil(BAND_ROWS).max(1) as usize;
         let per_region = size_of::<Region>() + 64 * size_of::<(u64, u32)>();
         let shares = threads.clamp(1, 16).min(capacity.max(1));
-        let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>();
+        // The depth buffers, zmin_row, the point image, the weights, the image, the gains.
+        let per_pixel = shares * 8 + 4 + PointImage::BYTES_PER_PIXEL + 4 + size_of::<Vec3>() + 4;
         // give_way and recompute (bit masks), display, status, the inserted and lost lists,
         // the changed pixels.
         let masks = 2 * 8 * height as usize * (width as usize).div_ceil(64);
@@ -435,6 +441,7 @@ impl RenderCache {
             flags: vec![0; capacity],
             stamp: vec![0; capacity],
             samples: vec![0; capacity],
+            spread: vec![[0.0; 2]; capacity],
         };
         // Region of band b: slots in proportion to the pixels before the band.
         let bands = (cfg.height.div_ceil(BAND_ROWS)).max(1);
@@ -479,6 +486,7 @@ impl RenderCache {
             points: PointImage::new(cfg.width, cfg.height),
             weights: vec![0.0; pixels],
             image: vec![cfg.background; pixels],
+            gains: vec![1.0; pixels],
         }
     }
 
@@ -530,6 +538,7 @@ impl RenderCache {
         p.pixel[i] = s.pixel;
         p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 } | if stale { FLAG_STALE } else { 0 };
         p.samples[i] = 1;
+        p.spread[i] = [converge::tone(s.color), 0.0];
         p.stamp[i] = self.next_stamp;
         // Not part of the last frame: never taken for a hidden point.
         self.proj[i] = Projected::NONE;

@@ -82,6 +82,27 @@ pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
     }
 }
 
+/// The most a point's priority reaches with its gain ([`priority_gained`]): below a stale
+/// point's, so that what a move changed and what no sample reaches still go first.
+pub const PRIORITY_GAINED_MAX: f32 = 0.5;
+
+/// [`priority`] with a point's (fresh or aged, not stale) priority multiplied by `gain`
+/// (a non-finite or negative gain counts as 1) and capped at [`PRIORITY_GAINED_MAX`]. With
+/// the age ramp a pixel's rate of picks grows about as the gain's 0.8th power (the ramp's
+/// floor keeps it below linear): a gain of σ over the image's σ comes close to picks in
+/// proportion to σ, which minimises the squared error (`render_cache/converge.rs`).
+#[inline]
+pub fn priority_gained(weight: f32, age: f32, max_age_frames: f32, gain: f32) -> f32 {
+    let p = priority(weight, age, max_age_frames);
+    let gain = if gain >= 0.0 && gain.is_finite() { gain } else { 1.0 };
+    let point = age < crate::render_cache::STALE_AGE;
+    if point {
+        (p * gain).min(PRIORITY_GAINED_MAX.max(p))
+    } else {
+        p
+    }
+}
+
 /// The sum of a row's priorities in f64: four partial sums over the columns `x % 4`,
 /// added pairwise (four independent additions per step instead of one long chain).
 #[inline]
@@ -285,6 +306,16 @@ impl Sampler {
     ///
     /// Panics if `weights` or `ages` do not have one entry per pixel (a caller bug).
     pub fn select(&mut self, weights: &[f32], ages: &[f32], cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
+        self.select_gained(weights, ages, None, cfg, budget, out);
+    }
+
+    /// [`Self::select`] with the priority of each pixel's (fresh or aged, not stale) point
+    /// multiplied by `gains` (one per pixel; `render_cache`'s `noise_gains`: noisier points
+    /// are re-shaded more often while the view is still), and capped at
+    /// [`PRIORITY_GAINED_MAX`], below stale points and unreached pixels.
+    ///
+    /// Panics if `weights`, `ages` or `gains` do not have one entry per pixel (a caller bug).
+    pub fn select_gained(&mut self, weights: &[f32], ages: &[f32], gains: Option<&[f32]>, cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
         out.clear();
         let (w, h) = (self.width as usize, self.height as usize);
         let n = w * h;
@@ -308,16 +339,29 @@ impl Sampler {
             return;
         }
         let max_age = cfg.max_age_frames;
+        if let Some(g) = gains {
+            assert_eq!(g.len(), n, "sampler: {} gains for a {w}x{h} image", g.len());
+        }
         // Priorities in one straight loop per row (it vectorises), then the row's sum (see
         // `row_sum`) and its maximum.
         let max = self
             .prio
             .par_chunks_mut(w)
+            .enumerate()
             .zip(weights.par_chunks(w).zip(ages.par_chunks(w)))
             .zip(self.row_sums.par_iter_mut())
-            .map(|((row, (wr, ar)), sum)| {
-                for ((p, &wt), &age) in row.iter_mut().zip(wr).zip(ar) {
-                    *p = priority(wt, age, max_age);
+            .map(|(((y, row), (wr, ar)), sum)| {
+                match gains {
+                    None => {
+                        for ((p, &wt), &age) in row.iter_mut().zip(wr).zip(ar) {
+                            *p = priority(wt, age, max_age);
+                        }
+                    }
+                    Some(g) => {
+                        for (((p, &wt), &age), &gain) in row.iter_mut().zip(wr).zip(ar).zip(&g[y * w..(y + 1) * w]) {
+                            *p = priority_gained(wt, age, max_age, gain);
+                        }
+                    }
                 }
                 *sum = row_sum(row);
                 row_max(row)

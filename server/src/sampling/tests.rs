@@ -341,3 +341,33 @@ fn plain_and_vector_dithering_agree() {
         assert_eq!(plain, fast, "case {case} ({w}x{h})");
     }
 }
+
+#[test]
+fn gains_scale_only_points_priorities_and_stay_below_stale_ones() {
+    let max_age = 120.0;
+    let fresh = priority(0.0, 0.0, max_age);
+    assert_eq!(priority_gained(0.0, 0.0, max_age, 1.0), fresh);
+    assert_eq!(priority_gained(0.0, 0.0, max_age, 3.0), 3.0 * fresh);
+    assert_eq!(priority_gained(0.0, 0.0, max_age, 0.25), 0.25 * fresh);
+    // Capped below a stale point's priority, which no gain changes; nor an unreached pixel's.
+    assert_eq!(priority_gained(0.0, 1000.0, max_age, 100.0), PRIORITY_GAINED_MAX);
+    assert!(PRIORITY_GAINED_MAX < PRIORITY_STALE_POINT);
+    let stale = crate::render_cache::STALE_AGE;
+    assert_eq!(priority_gained(0.0, stale, max_age, 0.1), PRIORITY_STALE_POINT);
+    assert_eq!(priority_gained(2.0, f32::INFINITY, max_age, 0.1), priority(2.0, f32::INFINITY, max_age));
+    // Nonsense gains count as 1.
+    for g in [f32::NAN, f32::INFINITY, -1.0] {
+        assert_eq!(priority_gained(0.0, 5.0, max_age, g), priority(0.0, 5.0, max_age));
+    }
+    // And select_gained with all gains 1 picks what select picks.
+    let (w, h) = (40u32, 30u32);
+    let n = (w * h) as usize;
+    let mut rng = Rng::new(4);
+    let weights: Vec<f32> = (0..n).map(|_| rng.range(0.0, 3.0)).collect();
+    let ages: Vec<f32> = (0..n).map(|i| if i % 7 == 0 { f32::INFINITY } else { rng.range(0.0, 200.0) }).collect();
+    let cfg = SamplingConfig::default();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    Sampler::new(w, h, 9).select(&weights, &ages, &cfg, n / 16, &mut a);
+    Sampler::new(w, h, 9).select_gained(&weights, &ages, Some(&vec![1.0; n]), &cfg, n / 16, &mut b);
+    assert_eq!(a, b);
+}

@@ -94,6 +94,9 @@ pub const MAX_REST_FRAMES: usize = 4;
 /// fps: an orbit or a drag never pauses that long between frames).
 pub const REST_AFTER_FRAMES: u32 = 8;
 
+/// Still frames between two updates of the noise gains (`request_next`).
+const NOISE_GAIN_FRAMES: u32 = 4;
+
 /// The pause between frame starts: the interactive one (`max_fps`) and the one to keep
 /// while nothing moves (`rest_fps`, when lower). At rest a frame only adds the samples
 /// that arrived since the last one, and on a machine the frame loop shares with the
@@ -173,6 +176,8 @@ pub(super) struct FrameLoop {
     /// Frames since the camera last changed or an object last moved (see
     /// [`frame_requests`]).
     still_frames: u32,
+    /// Whether the cache's noise gains are of this still view (`request_next`).
+    gains_ready: bool,
     /// Per object: its current object-to-world transform (for edge finding).
     transforms: Vec<glam::Affine3A>,
     /// Per object: the matrix taking its normals to world space now.
@@ -263,6 +268,7 @@ impl FrameLoop {
             last_move_epoch: 0,
             // A new session is at rest until the camera or an object first moves.
             still_frames: REST_AFTER_FRAMES,
+            gains_ready: false,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
             lights: p.scene.lights.iter().map(light_bound).collect(),
@@ -403,8 +409,20 @@ impl FrameLoop {
         let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
         self.picks.clear();
         if budget > 0 {
+            // While the view is still, noisier points are re-shaded more often (converging at
+            // rest, `render_cache/converge.rs`); in motion every point's age counts alike.
+            // The gains are a pass over the image with a scattered read of each pixel's point
+            // (2.6 ms of a rest frame at 512²) and a point's spread changes little in a few
+            // frames, so they are remade every NOISE_GAIN_FRAMES frames.
+            let at_rest = self.still_frames > REST_AFTER_FRAMES;
+            if !at_rest {
+                self.gains_ready = false;
+            } else if !self.gains_ready || self.still_frames % NOISE_GAIN_FRAMES == 0 {
+                self.gains_ready = self.cache.update_noise_gains();
+            }
+            let gains = (at_rest && self.gains_ready).then(|| self.cache.noise_gains());
             let ages = &self.cache.point_image().age;
-            self.sampler.select(self.cache.filter_weights(), ages, &cfg, budget, &mut self.picks);
+            self.sampler.select_gained(self.cache.filter_weights(), ages, gains, &cfg, budget, &mut self.picks);
             // Re-picked points are shaded again where they are, so the cache averages their
             // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
             let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;

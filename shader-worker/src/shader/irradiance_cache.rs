@@ -10,7 +10,8 @@
 //! w = 1 / (|p − pᵢ| / Rᵢ + √(1 − n·nᵢ)) above 1/a, each extrapolated with its gradients,
 //! Eᵢ + (nᵢ × n)·∇r + (p − pᵢ)·∇t, and averaged by weight; records "in front" of p are
 //! skipped (Ward's test). R is clamped to [Rmax / 16, Rmax] with Rmax = cell / a, so a
-//! record serves no farther than one grid cell and a lookup visits 27 cells; and to
+//! record serves no farther than one grid cell and a lookup visits the 27 cells around it
+//! (skipping those a whole cell away: no record there can reach it); and to
 //! E / |∇t E| (Křivánek et al. 2006's gradient limit), so extrapolation stays positive;
 //! where that limit falls below Rmin the gradients are scaled down instead
 //! ([`limit_gradients`]), so no lookup moves a record's irradiance by more than a·E per gradient.
@@ -28,6 +29,12 @@
 //! a record grows (the total is fixed by `max_rays`; the quarter makes it early: measured
 //! against asking after as many lookups as rays and after an eighth, `README` *Converging at
 //! rest*).
+//!
+//! Lookups are most of a worker's time with `gi` once the records exist (31–36 % of a
+//! worker's profile at rest before this layout), so the grid keeps, next to each other in
+//! its cell, what the weight test reads of each record ([`Entry`]: position, normal, R), and
+//! reads a record itself only when it serves; cells are found by a multiply-and-shift hash
+//! of the packed cell coordinates ([`CellHasher`]) rather than the standard SipHash.
 //!
 //! Bounded memory: at most [`MAX_RECORDS`] records in a ring (the oldest is dropped), a
 //! number of this module, never one an input gives.
@@ -47,6 +54,7 @@ use edgepoint_scene::Scene;
 use glam::{Affine3A, Vec3};
 use std::collections::HashMap;
 use std::f32::consts::{PI, TAU};
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::RwLock;
 
@@ -109,9 +117,56 @@ impl Record {
     /// Ward's weight of this record at (p, n) (capped, so a lookup at the record itself is finite).
     #[inline]
     pub fn weight(&self, p: Vec3, n: Vec3) -> f32 {
-        let den = (p - self.p).length() / self.r + (1.0 - n.dot(self.n)).max(0.0).sqrt();
-        1.0 / den.max(1e-6)
+        ward_weight(self.p, self.n, self.r, p, n)
     }
+}
+
+/// Ward's weight at (p, n) of a record at (rp, rn) with harmonic mean distance r.
+#[inline]
+fn ward_weight(rp: Vec3, rn: Vec3, r: f32, p: Vec3, n: Vec3) -> f32 {
+    let den = (p - rp).length() / r + (1.0 - n.dot(rn)).max(0.0).sqrt();
+    1.0 / den.max(1e-6)
+}
+
+/// A record in its grid cell: what a lookup's weight test reads (32 bytes, the cell's
+/// records side by side), and where the record is.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    p: Vec3,
+    n: Vec3,
+    r: f32,
+    index: u32,
+}
+
+/// Hashes a packed cell key (one `u64`) with SplitMix64's finaliser: every bit of the key
+/// reaches the high bits the table's control bytes take and the low bits its buckets take.
+#[derive(Default)]
+struct CellHasher(u64);
+
+impl Hasher for CellHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        let mut z = x ^ self.0.rotate_left(17);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        self.0 = z ^ (z >> 31);
+    }
+}
+
+type Grid = HashMap<u64, Vec<Entry>, BuildHasherDefault<CellHasher>>;
+
+/// Cell coordinates clamped to ±2^20 packed into 21 bits each.
+#[inline]
+fn pack(c: [i32; 3]) -> u64 {
+    let f = |v: i32| (v.clamp(-(1 << 20), (1 << 20) - 1) as u64) & 0x1f_ffff;
+    (f(c[0]) << 42) | (f(c[1]) << 21) | f(c[2])
 }
 
 /// A hemisphere gathered for a record (before R's clamping).
@@ -246,7 +301,15 @@ struct State {
     uses: Vec<AtomicU32>,
     /// Ring position of the next record once `records` is full.
     next: usize,
-    grid: HashMap<[i32; 3], Vec<u32>>,
+    grid: Grid,
+}
+
+impl State {
+    /// Adds record `i` (already in `records`) to its cell.
+    fn link(&mut self, key: u64, i: usize) {
+        let r = &self.records[i];
+        self.grid.entry(key).or_default().push(Entry { p: r.p, n: r.n, r: r.r, index: i as u32 });
+    }
 }
 
 /// A record's gathers, merged (see [`Raw::merge`]), and the face's normal at its point.
@@ -311,13 +374,17 @@ impl IrradianceCache {
     pub fn new((lo, hi): (Vec3, Vec3)) -> IrradianceCache {
         let diag = (hi - lo).length();
         let cell = if diag.is_finite() && diag > 0.0 { diag / CELLS_ACROSS } else { 1.0 };
-        let state = State { settings: None, transforms: Vec::new(), version: 0, records: Vec::new(), raw: Vec::new(), uses: Vec::new(), next: 0, grid: HashMap::new() };
+        let state = State { settings: None, transforms: Vec::new(), version: 0, records: Vec::new(), raw: Vec::new(), uses: Vec::new(), next: 0, grid: Grid::default() };
         IrradianceCache { cell, state: RwLock::new((state, CacheStats::default())) }
     }
 
-    fn key(&self, p: Vec3) -> [i32; 3] {
+    fn cell_of(&self, p: Vec3) -> [i32; 3] {
         let c = (p / self.cell).floor().clamp(Vec3::splat(-1e6), Vec3::splat(1e6));
         [c.x as i32, c.y as i32, c.z as i32]
+    }
+
+    fn key(&self, p: Vec3) -> u64 {
+        pack(self.cell_of(p))
     }
 
     /// The clamp range of R for accuracy `a`: a record serves at most a·R ≤ one cell away.
@@ -366,8 +433,8 @@ impl IrradianceCache {
             stats.invalidated += (before - s.records.len()) as u64;
             // Rebuild the grid over the kept records (indices moved).
             s.grid.clear();
-            for (i, r) in s.records.iter().enumerate() {
-                s.grid.entry(self.key(r.p)).or_default().push(i as u32);
+            for i in 0..s.records.len() {
+                s.link(self.key(s.records[i].p), i);
             }
             s.next = 0;
             s.transforms = transforms.to_vec();
@@ -393,25 +460,50 @@ impl IrradianceCache {
             return None;
         }
         let inv_a = 1.0 / t.settings.error;
-        let [x, y, z] = self.key(p);
+        let a = t.settings.error;
+        let a2 = a * a * (1.0 + 1e-4);
+        let c = self.cell_of(p);
+        // Where p lies in its cell (0..1 per axis): a neighbour cell nearer than a whole cell
+        // can hold a record that reaches p (a record serves within a·R ≤ one cell); the
+        // others cannot, and are skipped (a little slack for rounding). Cells at the clamp
+        // are all visited.
+        let f = p / self.cell - Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+        let exact = f.cmpge(Vec3::ZERO).all() && f.cmple(Vec3::ONE).all();
+        let gap = |d: i32, f: f32| match d {
+            -1 => f * f,
+            1 => (1.0 - f) * (1.0 - f),
+            _ => 0.0,
+        };
+        const REACH: f32 = 1.0 + 1e-3;
         let (mut sum, mut wsum) = (Vec3::ZERO, 0.0f32);
         let mut best = (0.0f32, usize::MAX);
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let Some(ids) = s.grid.get(&[x + dx, y + dy, z + dz]) else { continue };
-                    for &i in ids {
-                        let r = &s.records[i as usize];
-                        let w = r.weight(p, n);
-                        // Ward's "in front" test: a record whose point lies in front of p
-                        // (toward the normals) sees a different neighbourhood.
-                        if w <= inv_a || (p - r.p).dot(n + r.n) < -0.1 * r.r {
+                    if exact && gap(dx, f.x) + gap(dy, f.y) + gap(dz, f.z) >= REACH * REACH {
+                        continue;
+                    }
+                    let Some(entries) = s.grid.get(&pack([c[0] + dx, c[1] + dy, c[2] + dz])) else { continue };
+                    for e in entries {
+                        // Most of a cell's records are out of reach: w > 1/a needs both
+                        // |p - pᵢ| < a·Rᵢ and 1 - n·nᵢ < a², tested first without a square
+                        // root or a division (a margin for rounding; the weight decides).
+                        let d = p - e.p;
+                        let reach = a * e.r * (1.0 + 1e-4);
+                        if d.length_squared() >= reach * reach || 1.0 - n.dot(e.n) >= a2 {
                             continue;
                         }
-                        sum += r.extrapolate(p, n) * w;
+                        let w = ward_weight(e.p, e.n, e.r, p, n);
+                        // Ward's "in front" test: a record whose point lies in front of p
+                        // (toward the normals) sees a different neighbourhood.
+                        if w <= inv_a || (p - e.p).dot(n + e.n) < -0.1 * e.r {
+                            continue;
+                        }
+                        let i = e.index as usize;
+                        sum += s.records[i].extrapolate(p, n) * w;
                         wsum += w;
                         if w > best.0 {
-                            best = (w, i as usize);
+                            best = (w, i);
                         }
                     }
                 }
@@ -451,6 +543,11 @@ impl IrradianceCache {
         let (r, grad_r, grad_t) = self.served(&s.raw[i].g, t.settings.error);
         let rec = &mut s.records[i];
         (rec.e, rec.r, rec.grad_r, rec.grad_t, rec.rays) = (s.raw[i].g.e, r, grad_r, grad_t, total);
+        // The weight test reads R from the record's entry in its cell.
+        let key = self.key(rec.p);
+        if let Some(e) = s.grid.get_mut(&key).and_then(|v| v.iter_mut().find(|e| e.index as usize == i)) {
+            e.r = r;
+        }
         s.uses[i].store(0, Ordering::Relaxed);
         stats.refined += 1;
     }
@@ -489,24 +586,24 @@ impl IrradianceCache {
         }
         let key = self.key(p);
         if s.records.len() < MAX_RECORDS {
-            s.grid.entry(key).or_default().push(s.records.len() as u32);
             s.records.push(rec);
             s.raw.push(raw);
             s.uses.push(AtomicU32::new(0));
+            s.link(key, s.records.len() - 1);
         } else {
             let i = s.next;
             s.next = (s.next + 1) % MAX_RECORDS;
             let old_key = self.key(s.records[i].p);
-            if let Some(ids) = s.grid.get_mut(&old_key) {
-                ids.retain(|&x| x as usize != i);
-                if ids.is_empty() {
+            if let Some(entries) = s.grid.get_mut(&old_key) {
+                entries.retain(|e| e.index as usize != i);
+                if entries.is_empty() {
                     s.grid.remove(&old_key);
                 }
             }
             s.records[i] = rec;
             s.raw[i] = raw;
             s.uses[i].store(0, Ordering::Relaxed);
-            s.grid.entry(key).or_default().push(i as u32);
+            s.link(key, i);
             stats.evicted += 1;
         }
         rec
@@ -708,5 +805,80 @@ mod tests {
         assert!(cache.lookup(&t2, Vec3::splat(10.0), Vec3::Y).is_none() && cache.lookup(&t, Vec3::splat(10.0), Vec3::Y).is_none());
         cache.insert(&t, Vec3::splat(10.0), Vec3::Y, 0, &g, Vec3::Y);
         assert_eq!(cache.stats().records, 0, "a stale ticket stores nothing");
+    }
+    /// The lookup against every record (the brute-force oracle): the same weighted mean, the
+    /// same best record.
+    fn lookup_by_every_record(cache: &IrradianceCache, a: f32, p: Vec3, n: Vec3) -> Option<(Vec3, usize)> {
+        let g = cache.state.read().unwrap();
+        let (mut sum, mut wsum, mut best) = (Vec3::ZERO, 0.0f32, (0.0f32, usize::MAX));
+        for (i, r) in g.0.records.iter().enumerate() {
+            let w = r.weight(p, n);
+            if w <= 1.0 / a || (p - r.p).dot(n + r.n) < -0.1 * r.r {
+                continue;
+            }
+            sum += r.extrapolate(p, n) * w;
+            wsum += w;
+            if w > best.0 {
+                best = (w, i);
+            }
+        }
+        (wsum > 0.0).then(|| (sum / wsum, best.1))
+    }
+
+    #[test]
+    fn lookups_find_what_a_scan_of_every_record_finds() {
+        let (lo, hi) = (Vec3::new(-1.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 1.0));
+        let cache = IrradianceCache::new((lo, hi));
+        let scene = Scene { objects: vec![], ..edgepoint_scene::builtin::load("cornell").unwrap() };
+        let settings = CacheSettings { error: 0.25, rays: 16, max_depth: 2, max_rays: 64 };
+        let t = cache.sync(&scene, &[], settings);
+        let (r_min, r_max) = cache.radius_range(settings.error);
+        let mut rng = Rng::new(5, 1);
+        let mut u = move || rng.next_f32();
+        let dir = |u: &mut dyn FnMut() -> f32| Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(Vec3::Y);
+        // Records on a few planes and scattered, of every R from below Rmin to beyond Rmax.
+        for k in 0..3000 {
+            let p = if k % 3 == 0 { Vec3::new(lo.x + u() * 4.0, 0.0, lo.z + u() * 3.0) } else { lo + Vec3::new(u() * 4.0, u() * 2.0, u() * 3.0) };
+            let n = if k % 3 == 0 { Vec3::Y } else { dir(&mut u) };
+            let r = r_min * 0.5 + u() * (r_max * 1.5);
+            let g = Gathered { e: Vec3::new(u(), u(), u()) + 0.1, r, grad_r: [dir(&mut u) * 0.1; 3], grad_t: [dir(&mut u) * 0.2; 3] };
+            cache.insert(&t, p, n, 0, &g, n);
+        }
+        // Some refined (their R changes).
+        let mut refined = 0;
+        for k in 0..20_000 {
+            let p = lo + Vec3::new(u() * 4.0, u() * 2.0, u() * 3.0);
+            let p = if k % 2 == 0 { Vec3::new(p.x, 0.0, p.z) } else { p };
+            if let Some((_, Some(req))) = cache.lookup_counted(&t, p, Vec3::Y) {
+                let g = Gathered { e: Vec3::splat(0.5), r: r_min + u() * r_max, grad_r: [Vec3::ZERO; 3], grad_t: [Vec3::ZERO; 3] };
+                cache.refine(&t, &req, &g);
+                refined += 1;
+            }
+        }
+        assert!(refined > 20, "{refined} refined");
+        let (mut found, mut checked) = (0, 0);
+        for k in 0..20_000 {
+            // Points anywhere, on the plane, and on the cell boundaries.
+            let mut p = lo + Vec3::new(u() * 4.0, u() * 2.0, u() * 3.0);
+            if k % 3 == 0 {
+                p.y = 0.0;
+            }
+            if k % 5 == 0 {
+                p.x = (p.x / cache.cell).round() * cache.cell;
+            }
+            let n = if k % 2 == 0 { Vec3::Y } else { dir(&mut u) };
+            let want = lookup_by_every_record(&cache, settings.error, p, n);
+            let got = cache.lookup(&t, p, n);
+            checked += 1;
+            match (want, got) {
+                (None, None) => {}
+                (Some((w, _)), Some(g)) => {
+                    found += 1;
+                    assert!((w - g).abs().max_element() <= 1e-5 * w.abs().max_element().max(1.0), "at {p}: {g} vs every record's {w}");
+                }
+                _ => panic!("at {p} {n}: {got:?} vs every record's {want:?}"),
+            }
+        }
+        assert!(found > checked / 10, "{found} of {checked} lookups served");
     }
 }
