@@ -94,7 +94,7 @@ pub fn run(args: SamplingArgs) -> Result<()> {
                     let mut out: Vec<PixelRequest> = Vec::new();
                     let mut prio = vec![0.0f32; n];
                     let mut ring = RequestRing::new(budget * 4);
-                    let spec = BatchSpec { epoch: 1, shader: "direct", params: &params, batch_size: args.batch_size, parts: 1 };
+                    let spec = BatchSpec { epoch: 1, shader: "direct", params: &params, batch_size: args.batch_size, parts: 1, coherent: false };
                     let (mut next_batch, mut seed, mut batches) = (0u64, 1u64, Vec::new());
                     let mut m = BTreeMap::new();
                     m.insert(

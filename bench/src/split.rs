@@ -203,7 +203,7 @@ impl<'a> Job<'a> {
                 PixelRequest { x: (sx as u32).min(w - 1), y: (sy as u32).min(h - 1), sx, sy, point: u32::MAX }
             })
             .collect();
-        let spec = BatchSpec { epoch: 0, shader: self.shader, params: self.params, batch_size: self.batch, parts: self.parts };
+        let spec = BatchSpec { epoch: 0, shader: self.shader, params: self.params, batch_size: self.batch, parts: self.parts, coherent: false };
         build_batches(&picks, &self.cam, &mut self.ring, &spec, &mut self.next_batch, &mut self.seed, out);
     }
 }

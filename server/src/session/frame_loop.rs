@@ -52,7 +52,7 @@ pub const OUTSTANDING_FRAMES: usize = 4;
 pub const TARGET_SAMPLE_LATENCY: Duration = Duration::from_millis(100);
 
 /// Requests allowed in flight: between one frame's budget and [`OUTSTANDING_FRAMES`] of
-/// them (times `frames`, see [`rest_frames`]), and no more than the workers shade at their
+/// them (times `frames`: [`REST_FRAMES`] at rest), and no more than the workers shade at their
 /// measured `rate` (samples per second; 0 = not measured yet) in [`TARGET_SAMPLE_LATENCY`]
 /// plus `refill`, the time until the next frame's requests go out.
 ///
@@ -75,24 +75,52 @@ pub fn max_outstanding(per_frame: usize, rate: f64, refill: Duration, frames: us
     ((rate * (TARGET_SAMPLE_LATENCY + refill).as_secs_f64()) as usize).clamp(per_frame, most * frames.max(1))
 }
 
-/// The most interactive frame periods a rest period stands for (its budget of requests in
-/// flight is that many frames' worth, so requests per second at rest may match those in
-/// motion), at most [`MAX_REST_FRAMES`]: the request ring is sized for it.
-pub fn rest_frames(s: &SessionSettings) -> usize {
-    if s.rest_fps < s.max_fps && s.rest_fps > 0.0 {
-        ((s.max_fps / s.rest_fps).ceil() as usize).clamp(1, MAX_REST_FRAMES)
+/// Frames' worth of requests a still view may have in flight or held ([`max_outstanding`]'s
+/// `frames` at rest): 8 × [`OUTSTANDING_FRAMES`] budgets, half the pixels at the default
+/// sparseness. It bounds the request ring, not the rate: at rest the workers' own rate does
+/// ([`max_outstanding`], [`release_bound`]). With 3 (the interactive frames of a 10 fps rest
+/// period), `cornell` with `gi` was held to 49k requests a 100 ms frame, less than its two
+/// workers shade in a period and a round trip (520k samples/s on two cores with coherent
+/// batches), and they idled for a tenth of the machine.
+pub const REST_FRAMES: usize = 8;
+
+/// Requests that may be outstanding at the workers (submitted to the dispatcher) while more
+/// of a frame's requests are held back in the session: in motion no bound (a frame asks for
+/// its budget, [`frame_requests`]); at rest the [`TARGET_SAMPLE_LATENCY`] of work at the
+/// workers' `rate`, between one frame's budget and [`OUTSTANDING_FRAMES`] × `frames` of them.
+///
+/// At rest a frame picks the requests of its whole rest period ([`max_outstanding`] with the
+/// refill): at 5 frames a second and 500k samples a second, 150,000 requests. Submitted at
+/// once, they would overflow the dispatcher's queue (1,024 batches) and the workers would
+/// idle for the end of the period; and a motion starting from rest would find them all ahead
+/// of its first samples at the workers. Held in the session, they go out as answers come
+/// back, and the next frame's picks (or the first motion) replace what is left.
+pub fn release_bound(per_frame: usize, rate: f64, frames: usize, at_rest: bool) -> usize {
+    if at_rest {
+        max_outstanding(per_frame, rate, Duration::ZERO, frames)
     } else {
-        1
+        usize::MAX
     }
 }
-
-/// Bound of [`rest_frames`] (4: the default 30 and 10 fps take 3).
-pub const MAX_REST_FRAMES: usize = 4;
 
 /// Frames the camera and the objects must have stayed still before the session samples at
 /// the workers' pace instead of its interactive budget (about a quarter of a second at 30
 /// fps: an orbit or a drag never pauses that long between frames).
 pub const REST_AFTER_FRAMES: u32 = 8;
+
+/// Still frames after which requests go out in runs of neighbouring pixels
+/// (`BatchSpec::coherent`) and in batches of [`REST_BATCH_REQUESTS`]: about a second at the
+/// rest pace after [`REST_AFTER_FRAMES`]. Before, a session's first frames and the first
+/// frames after a motion still have regions without samples, which batches spread over the
+/// image fill everywhere at once (with coherent batches from the first frame, `cornell` with
+/// `gi` showed 17.7–18.7 dB at 0.25 s instead of 21.7–24, its first answers a band of rows).
+const COHERENT_AFTER_FRAMES: u32 = REST_AFTER_FRAMES + 10;
+
+/// Requests per batch at rest, at least (the session's `batch_size` when larger). At rest the
+/// workers shade half a million samples a second on two cores: in batches of 64 that is
+/// 8,000 messages, fork-joins and wake-ups a second. The worker pool still splits a batch
+/// into pieces of its worker's measured 25 ms of work.
+const REST_BATCH_REQUESTS: usize = 1024;
 
 /// Still frames between two updates of the noise gains (`request_next`).
 const NOISE_GAIN_FRAMES: u32 = 4;
@@ -222,7 +250,8 @@ pub(super) struct FrameLoop {
     /// Requests sent since the last frame was published (`Frame.samples_requested`).
     requested: u32,
     picks: Vec<PixelRequest>,
-    batches: Vec<pb::RequestBatch>,
+    /// Request batches built and not yet submitted (see [`release_bound`]).
+    held: std::collections::VecDeque<pb::RequestBatch>,
     next_batch_id: u64,
     seed: u64,
     sequence: u64,
@@ -300,7 +329,7 @@ impl FrameLoop {
             after_times: StageTimes::new(),
             requested: 0,
             picks: Vec::new(),
-            batches: Vec::new(),
+            held: std::collections::VecDeque::new(),
             next_batch_id: 0,
             seed: mix64(p.seed ^ 0x5eed),
             sequence: 0,
@@ -398,7 +427,7 @@ impl FrameLoop {
         // The dispatcher counts parts; the budget counts samples (pixels shaded whole).
         let parts = self.split.parts() as f64;
         let (refill, frames) = if self.still_frames >= REST_AFTER_FRAMES {
-            (frame_periods(&self.settings, self.still_frames).1, rest_frames(&self.settings))
+            (frame_periods(&self.settings, self.still_frames).1, REST_FRAMES)
         } else {
             (Duration::ZERO, 1)
         };
@@ -432,7 +461,7 @@ impl FrameLoop {
         self.after_times.add("sampling", ms_since(t));
 
         let t = Instant::now();
-        self.requested += self.send_requests();
+        self.send_requests();
         self.after_times.add("requests", ms_since(t));
     }
 
@@ -819,30 +848,61 @@ impl FrameLoop {
         worst
     }
 
-    /// Builds ray batches for the picked pixels and submits them; returns requests sent.
-    fn send_requests(&mut self) -> u32 {
-        self.batches.clear();
+    /// Builds ray batches for the picked pixels and submits them, or as many as
+    /// [`release_bound`] lets out now (the rest are held and go out as answers come back,
+    /// [`Self::release_held`]). Batches still held from the last frame are dropped: this
+    /// frame's picks replace them.
+    fn send_requests(&mut self) {
+        self.held.clear();
+        let converging = self.still_frames > COHERENT_AFTER_FRAMES;
+        let batch_size = self.settings.batch_size as usize;
         let spec = BatchSpec {
             epoch: self.epoch,
             shader: &self.shader,
             params: &self.shader_params,
-            batch_size: self.settings.batch_size as usize,
+            batch_size: if converging { batch_size.max(REST_BATCH_REQUESTS) } else { batch_size },
             parts: self.split.parts(),
+            coherent: converging,
         };
-        build_batches(&self.picks, &self.cam_frame, &mut self.ring, &spec, &mut self.next_batch_id, &mut self.seed, &mut self.batches);
+        let mut batches = Vec::new();
+        build_batches(&self.picks, &self.cam_frame, &mut self.ring, &spec, &mut self.next_batch_id, &mut self.seed, &mut batches);
+        self.held.extend(batches);
+        self.release_held();
+    }
+
+    /// Submits held batches while the requests outstanding stay under [`release_bound`].
+    fn release_held(&mut self) {
+        if self.settings.paused {
+            self.held.clear();
+            return;
+        }
+        let parts = self.split.parts() as usize;
+        let at_rest = self.still_frames >= REST_AFTER_FRAMES;
+        let pixels = self.width as usize * self.height as usize;
+        // The rate received is what was let through; the rate of the workers' busy time is
+        // what they can do (a bound from the first alone can only shrink, see max_outstanding).
+        let rate = self.dispatcher.samples_per_second().max(self.dispatcher.samples_per_busy_second());
+        let bound = release_bound(self.settings.frame_budget(pixels), rate / parts as f64, REST_FRAMES, at_rest);
         let mut sent = 0u32;
-        for b in self.batches.drain(..) {
-            let n = b.requests.len() as u32;
-            if self.dispatcher.submit(b) {
-                sent += n;
-            } else {
-                // Queue full: the rest waits for the next frame's (re-prioritised) selection.
-                self.counters.refused_batches += 1;
+        while let Some(b) = self.held.pop_front() {
+            if (self.dispatcher.outstanding_requests() as usize) / parts >= bound {
+                self.held.push_front(b);
                 break;
+            }
+            let n = b.requests.len() as u32;
+            match self.dispatcher.try_submit(b) {
+                Ok(()) => sent += n,
+                Err(b) => {
+                    // Queue full: retried when the next answer frees room, or replaced by
+                    // the next frame's (re-prioritised) selection.
+                    self.counters.refused_batches += 1;
+                    self.held.push_front(b);
+                    break;
+                }
             }
         }
         self.counters.samples_requested += sent as u64;
-        sent
+        self.requested += sent;
     }
 
     /// Sleeps until `late`, collecting inputs — or, from `soon` on, until a camera change or
@@ -886,6 +946,9 @@ impl FrameLoop {
                     let t = Instant::now();
                     self.between.0 += self.insert_samples();
                     self.between.1 += ms_since(t);
+                    if !motion {
+                        self.release_held();
+                    }
                 }
                 Woke::Timeout => {}
             }
@@ -967,13 +1030,13 @@ mod tests {
     }
 
     #[test]
-    fn a_rest_period_stands_for_its_interactive_frames_at_most_four() {
-        let s = SessionSettings::default();
-        assert_eq!((s.max_fps, s.rest_fps), (30.0, 10.0));
-        assert_eq!(rest_frames(&s), 3);
-        assert_eq!(rest_frames(&SessionSettings { rest_fps: 30.0, ..s }), 1, "pacing off");
-        assert_eq!(rest_frames(&SessionSettings { rest_fps: 12.0, ..s }), 3, "2.5 periods round up");
-        assert_eq!(rest_frames(&SessionSettings { rest_fps: 0.1, ..s }), MAX_REST_FRAMES);
+    fn at_rest_only_the_workers_latency_worth_goes_out_and_motion_sends_everything() {
+        let per_frame = 4096;
+        assert_eq!(release_bound(per_frame, 0.0, REST_FRAMES, true), per_frame * OUTSTANDING_FRAMES, "rate unknown");
+        assert_eq!(release_bound(per_frame, 500_000.0, REST_FRAMES, true), 50_000, "100 ms of work");
+        assert_eq!(release_bound(per_frame, 1e9, REST_FRAMES, true), per_frame * OUTSTANDING_FRAMES * REST_FRAMES);
+        assert_eq!(release_bound(per_frame, 1_000.0, REST_FRAMES, true), per_frame, "never below a frame's budget");
+        assert_eq!(release_bound(per_frame, 500_000.0, REST_FRAMES, false), usize::MAX, "in motion a frame's budget goes at once");
     }
 
     #[test]

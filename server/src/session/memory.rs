@@ -6,7 +6,7 @@
 //! not resident pages: reserved capacity (the Render Cache's replacement queues) counts
 //! from the start, since it fills as the session runs.
 use super::settings::SessionSettings;
-use super::frame_loop::{rest_frames, OUTSTANDING_FRAMES};
+use super::frame_loop::{OUTSTANDING_FRAMES, REST_FRAMES};
 use super::requests::RequestRing;
 use crate::epi::spread::BaselineHoles;
 use crate::epi::Epi;
@@ -56,11 +56,11 @@ impl SessionMemory {
     }
 }
 
-/// Ring size: all requests that can be outstanding (frames of budget, at rest those of the
-/// interactive frames a rest period stands for, plus a batch), twice over, so an answer
-/// arriving late still finds its request.
+/// Ring size: all requests that can be outstanding or held (frames of budget, at rest
+/// [`REST_FRAMES`] of them), twice over, so an answer arriving late still finds its request.
+/// (Batches add nothing: a frame's batches hold its picks, and no more are picked.)
 pub fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
-    2 * (s.frame_budget(pixels) * OUTSTANDING_FRAMES * rest_frames(s) + s.batch_size as usize)
+    2 * s.frame_budget(pixels) * OUTSTANDING_FRAMES * REST_FRAMES
 }
 
 fn mib(bytes: u64) -> String {

@@ -100,6 +100,9 @@ pub struct BatchSpec<'a> {
     pub batch_size: usize,
     /// Parts per sample (split shading, paper 004 §4.4; 1: whole pixels).
     pub parts: u32,
+    /// Batches of neighbouring picks instead of picks spread over the image (see
+    /// [`build_batches`]).
+    pub coherent: bool,
 }
 
 /// Turns the pixels the sampler chose into ray request batches through `cam`, recording
@@ -110,6 +113,11 @@ pub struct BatchSpec<'a> {
 /// first to arrive then already cover the whole frame: a session's first frame is coarse
 /// but complete instead of a band of the top rows, and after a fast move the newly exposed
 /// regions everywhere get their first samples at once.
+///
+/// `spec.coherent` (a still view, converging): batch `b` takes the `b`-th run of consecutive
+/// picks instead, neighbouring pixels, whose rays share the worker's BVH nodes and
+/// irradiance records in its caches; at rest every batch of a round arrives long before the
+/// image is next looked at, so nothing is lost by it.
 ///
 /// Split shading (`spec.parts` > 1): each batch goes out as `parts` sibling batches, one
 /// per part, with the same requests, ids and seed (so the parts draw the random numbers of
@@ -131,13 +139,18 @@ pub fn build_batches(
     let (base, extra) = (picks.len() / batches.max(1), picks.len() % batches.max(1));
     let start = |b: usize| first_id + (b * base + b.min(extra)) as u64;
     let mut all: Vec<Vec<pb::ShadeRequest>> = Vec::with_capacity(batches);
+    let batch_picks = |b: usize| -> std::iter::StepBy<std::iter::Skip<std::slice::Iter<'_, PixelRequest>>> {
+        if spec.coherent {
+            let (from, to) = ((start(b) - first_id) as usize, (start(b + 1) - first_id) as usize);
+            picks[from..to].iter().skip(0).step_by(1)
+        } else {
+            picks.iter().skip(b).step_by(batches)
+        }
+    };
     (0..batches)
         .into_par_iter()
         .map(|b| {
-            picks
-                .iter()
-                .skip(b)
-                .step_by(batches)
+            batch_picks(b)
                 .enumerate()
                 .map(|(j, p)| {
                     let (origin, dir) = cam.ray(p.sx, p.sy);
@@ -147,7 +160,7 @@ pub fn build_batches(
         })
         .collect_into_vec(&mut all);
     for (b, requests) in all.iter().enumerate() {
-        for (r, p) in requests.iter().zip(picks.iter().skip(b).step_by(batches)) {
+        for (r, p) in requests.iter().zip(batch_picks(b)) {
             let dir = r.direction.map_or(Vec3::ZERO, Vec3::from);
             let id = ring.push([p.x, p.y], dir, p.point);
             debug_assert_eq!(id, r.id);
@@ -225,7 +238,7 @@ mod tests {
         let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: i % 16, sx: i as f32 + 0.25, sy: (i % 16) as f32 + 0.75, point: i }).collect();
         let mut ring = RequestRing::new(64);
         let params = std::collections::HashMap::from([("ambient".to_string(), 0.1)]);
-        let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4, parts: 1 };
+        let spec = BatchSpec { epoch: 3, shader: "direct", params: &params, batch_size: 4, parts: 1, coherent: false };
         let (mut next, mut seed, mut out) = (7u64, 1u64, Vec::new());
         build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
         assert_eq!(out.iter().map(|b| b.requests.len()).collect::<Vec<_>>(), vec![4, 3, 3]);
@@ -254,12 +267,34 @@ mod tests {
     }
 
     #[test]
+    fn coherent_batches_take_runs_of_neighbouring_picks_with_the_same_ids() {
+        let cam = Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 };
+        let f = cam.frame(32, 16);
+        let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: 3, sx: i as f32 + 0.5, sy: 3.5, point: i }).collect();
+        let params = std::collections::HashMap::new();
+        let mut out = [Vec::new(), Vec::new()];
+        for (coherent, out) in [false, true].into_iter().zip(&mut out) {
+            let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: 4, parts: 1, coherent };
+            let (mut ring, mut next, mut seed) = (RequestRing::new(64), 0u64, 1u64);
+            build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, out);
+            for r in out.iter().flat_map(|b| &b.requests) {
+                assert_eq!(ring.get(r.id).unwrap().pixel, [r.pixel_x, 3], "the ring follows the batches");
+            }
+        }
+        let xs = |b: &pb::RequestBatch| b.requests.iter().map(|r| r.pixel_x).collect::<Vec<_>>();
+        assert_eq!(out[1].iter().map(xs).collect::<Vec<_>>(), vec![vec![0, 1, 2, 3], vec![4, 5, 6], vec![7, 8, 9]]);
+        let ids = |o: &[pb::RequestBatch]| o.iter().map(|b| b.requests.iter().map(|r| r.id).collect::<Vec<_>>()).collect::<Vec<_>>();
+        assert_eq!(ids(&out[0]), ids(&out[1]), "same sizes and ids, other pixels");
+        assert_eq!(out[0].iter().map(xs).collect::<Vec<_>>()[0], vec![0, 3, 6, 9]);
+    }
+
+    #[test]
     fn split_batches_are_siblings_with_one_seed_and_every_part() {
         let cam = Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 50.0 };
         let f = cam.frame(32, 16);
         let picks: Vec<PixelRequest> = (0..10).map(|i| PixelRequest { x: i, y: 0, sx: i as f32 + 0.5, sy: 0.5, point: u32::MAX }).collect();
         let params = std::collections::HashMap::new();
-        let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: 4, parts: 3 };
+        let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: 4, parts: 3, coherent: false };
         let (mut ring, mut next, mut seed, mut out) = (RequestRing::new(64), 0u64, 1u64, Vec::new());
         build_batches(&picks, &f, &mut ring, &spec, &mut next, &mut seed, &mut out);
         assert_eq!(out.len(), 9, "three batches of picks, three parts each");

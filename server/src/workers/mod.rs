@@ -782,6 +782,14 @@ impl Dispatcher {
         out
     }
 
+    /// What the live workers can shade: the sum of their samples per busy second (a link
+    /// is busy while it has batches in flight; 0 until measured). Unlike
+    /// [`Self::samples_per_second`] it does not fall when the workers are kept short of work.
+    pub fn samples_per_busy_second(&self) -> f64 {
+        let links = self.shared.links.lock().unwrap_or_else(|p| p.into_inner());
+        links.iter().filter(|s| s.live.load(Ordering::Relaxed)).map(|s| f64::from_bits(s.rate_bits.load(Ordering::Relaxed))).filter(|r| r.is_finite() && *r > 0.0).sum()
+    }
+
     /// Samples received per second over the last two seconds.
     pub fn samples_per_second(&self) -> f64 {
         self.shared.rate.lock().unwrap_or_else(|p| p.into_inner()).per_second(Instant::now())
