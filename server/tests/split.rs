@@ -31,7 +31,7 @@ fn requests(scene: &edgepoint_scene::Scene, batches: usize, size: usize, parts: 
         })
         .collect();
     let params = HashMap::new();
-    let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: size, parts };
+    let spec = BatchSpec { epoch: 0, shader: "direct", params: &params, batch_size: size, parts, coherent: false };
     let (mut ring, mut next, mut seed, mut out) = (RequestRing::new(picks.len()), 0, 3, Vec::new());
     build_batches(&picks, &cam, &mut ring, &spec, &mut next, &mut seed, &mut out);
     out
