@@ -9,7 +9,10 @@
 //! "Its" point is the one the request was aimed at (the session remembers it with the
 //! request), when the last frame still showed it at the sample's pixel and it lies on the
 //! same object (or is the same background direction) within [`SAME_POINT_RELATIVE`] of the
-//! sample's position: exact, and O(1). The sample is averaged in only while
+//! sample's position: exact, and O(1). In a pixel no edge crosses, the request is instead
+//! for the point anywhere in its pixel (`sampling::AIM_IN_PIXEL`, a jittered position): a
+//! sample of the same object there is averaged in, and the point converges to its pixel's
+//! mean, as the converged reference's pixel does. The sample is averaged in only while
 //! nothing can have changed the point's shading since it was shaded: the point is not stale
 //! (its object moved, a moved object may shadow it) and the sample was shaded at the point's
 //! epoch (no object moved in between). Otherwise the sample replaces the point as a new
@@ -62,7 +65,8 @@ impl RenderCache {
         if !(s.position.is_finite() && s.color.is_finite()) {
             return false;
         }
-        match self.own_point(s, point).filter(|_| !stale) {
+        let (point, anywhere) = crate::sampling::aimed_point(point);
+        match self.own_point(s, point, anywhere).filter(|_| !stale) {
             Some((i, pixel)) if self.may_average(i, s) => self.average_into(i, pixel, s),
             Some((i, _)) => return self.write(i as u32, self.region_of(i as u32), s, false),
             None => return self.insert_aged(s, stale),
@@ -71,8 +75,10 @@ impl RenderCache {
     }
 
     /// Slot `point` and the index of `s`'s pixel, when the last frame showed that point at
-    /// the pixel and `s` is a sample of the same surface point (module doc).
-    fn own_point(&self, s: &Sample, point: u32) -> Option<(usize, usize)> {
+    /// the pixel and `s` is a sample of the same surface point (module doc) — or, when the
+    /// request was for the point `anywhere` in its pixel (`sampling::AIM_IN_PIXEL`: no edge
+    /// crosses the pixel), of the same object anywhere in the pixel.
+    fn own_point(&self, s: &Sample, point: u32, anywhere: bool) -> Option<(usize, usize)> {
         let [x, y] = s.pixel;
         if point == NO_POINT || x >= self.cfg.width || y >= self.cfg.height {
             return None;
@@ -86,6 +92,9 @@ impl RenderCache {
         let flags = p.flags[i];
         if flags & FLAG_VALID == 0 || (flags & FLAG_HIT != 0) != s.hit || p.object[i] != s.object {
             return None;
+        }
+        if anywhere {
+            return Some((i, pixel));
         }
         let (position, scale) = if s.hit { (s.position, self.points.depth[pixel]) } else { (s.position.normalize(), 1.0) };
         let tolerance = SAME_POINT_RELATIVE * scale;

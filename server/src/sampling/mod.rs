@@ -46,8 +46,8 @@ pub struct PixelRequest {
     /// Continuous image position in [x, x+1) x [y, y+1) (DESIGN.md conventions).
     pub sx: f32,
     pub sy: f32,
-    /// The cached point the pick shades again ([`aim_at_points`]), or
-    /// [`crate::render_cache::NO_POINT`] for a jittered pick.
+    /// The cached point the pick shades again ([`aim_at_points`]; with [`AIM_IN_PIXEL`]:
+    /// anywhere in its pixel), or [`crate::render_cache::NO_POINT`] for a jittered pick.
     pub point: u32,
 }
 
@@ -209,12 +209,23 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 
 /// Converging at rest (issue 14 item 3, `render_cache/converge.rs`): a pick of a pixel that
 /// shows a fresh point, whose sample the reconstruction can use (`usable(x, y)`), is aimed
-/// at that point's position inside the pixel instead of a jittered one. The worker then
-/// shades the same surface point again, and the cache averages the new sample into it. A
-/// pixel without a point, with a stale one (something changed it: it is replaced, not
-/// averaged), or whose sample is edge-ambiguous or in a complex pixel keeps its jittered
-/// position, so new points still land elsewhere in it.
-pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::PointImage, usable: impl Fn(u32, u32) -> bool + Sync) {
+/// at that point (`point`). In a pixel no edge crosses (`anywhere(x, y)`: one surface as far
+/// as the edge-and-point image knows) it keeps its jittered position and is marked
+/// [`AIM_IN_PIXEL`]: the cache averages its sample into the point all the same, so the point
+/// converges to the mean of its pixel — what a pixel of the converged reference is — rather
+/// than to the value at the one position it was first shaded at (on `cornell` with `gi` that
+/// difference had held edge-and-point at 49.7–50.1 dB at 30 s with 43–66 samples per pixel; with
+/// it, 50.4–50.6 dB with 43–63). Elsewhere it is aimed at the point's position inside the
+/// pixel instead of a jittered one: the worker shades the same surface point again. A pixel
+/// without a point, with a stale one (something changed it: it is replaced, not averaged), or
+/// whose sample is edge-ambiguous or in a complex pixel keeps its jittered position and no
+/// point, so new points still land elsewhere in it.
+pub fn aim_at_points(
+    picks: &mut [PixelRequest],
+    points: &crate::render_cache::PointImage,
+    usable: impl Fn(u32, u32) -> bool + Sync,
+    anywhere: impl Fn(u32, u32) -> bool + Sync,
+) {
     let w = points.width as usize;
     // In parallel: each pick reads three arrays of the point image at its own pixel, most of
     // them cache misses (the frame loop's other passes have run since).
@@ -223,11 +234,31 @@ pub fn aim_at_points(picks: &mut [PixelRequest], points: &crate::render_cache::P
             let i = p.y as usize * w + p.x as usize;
             let Some(&point) = points.point.get(i) else { continue };
             if point != NO_POINT && points.age[i] < crate::render_cache::STALE_AGE && usable(p.x, p.y) {
-                let [u, v] = points.subpixel[i];
-                (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+                debug_assert!(point < AIM_IN_PIXEL, "point slots stay below the flag bit");
+                if anywhere(p.x, p.y) {
+                    p.point = point | AIM_IN_PIXEL;
+                } else {
+                    let [u, v] = points.subpixel[i];
+                    (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+                }
             }
         }
     });
+}
+
+/// Flag bit of [`PixelRequest::point`] ([`aim_at_points`]): the pick is a sample of the
+/// point anywhere in its pixel, not at its position. (Point slots are far below 2³¹: the
+/// cache holds a few points per pixel.)
+pub const AIM_IN_PIXEL: u32 = 1 << 31;
+
+/// The point slot a pick or request was aimed at and whether anywhere in its pixel
+/// ([`AIM_IN_PIXEL`]); [`crate::render_cache::NO_POINT`] stays itself.
+pub fn aimed_point(point: u32) -> (u32, bool) {
+    if point != NO_POINT && point & AIM_IN_PIXEL != 0 {
+        (point & !AIM_IN_PIXEL, true)
+    } else {
+        (point, false)
+    }
 }
 
 /// Of the priorities `c` at scale `s`: how many saturate (`p · s ≥ 1`, picked for sure), and

@@ -456,7 +456,10 @@ impl FrameLoop {
             // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
             let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;
             let flags = self.epi.flags();
-            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || flags.get(x as usize, y as usize, Flags::USABLE));
+            let at = |x: u32, y: u32, plane: usize| flags.get(x as usize, y as usize, plane);
+            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || at(x, y, Flags::USABLE), |x, y| {
+                epr && !at(x, y, Flags::SIMPLE) && !at(x, y, Flags::COMPLEX)
+            });
         }
         self.after_times.add("sampling", ms_since(t));
 

@@ -66,7 +66,7 @@ fn aimed_picks(c: &RenderCache, rng: &mut Rng) -> Vec<PixelRequest> {
     for p in &mut picks {
         (p.sx, p.sy) = (p.x as f32 + rng.unit(), p.y as f32 + rng.unit());
     }
-    aim_at_points(&mut picks, c.point_image(), |_, _| true);
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
     picks
 }
 
@@ -153,7 +153,7 @@ fn a_pixel_s_variance_falls_as_one_over_its_samples_over_still_frames() {
             last_mse = mse;
         }
         sampler.select(c.filter_weights(), &c.point_image().age, &cfg, n_px / 4, &mut picks);
-        aim_at_points(&mut picks, c.point_image(), |_, _| true);
+        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
         for p in &picks {
             c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noisy(&mut rng), 1), false, p.point);
         }
@@ -237,6 +237,56 @@ fn changes_reset_the_count_and_other_samples_do_not_join_a_point() {
 }
 
 #[test]
+fn a_point_of_an_edge_free_pixel_averages_samples_from_anywhere_in_its_pixel() {
+    let cam = camera(24, 16);
+    let mut c = RenderCache::new(CacheConfig { width: 24, height: 16, points_per_pixel: 2.0, background: Vec3::ZERO });
+    let mut rng = Rng::new(5);
+    first_samples(&mut c, &cam, &mut rng, |_| Vec3::splat(0.5));
+    let mut picks: Vec<PixelRequest> =
+        (0..16).flat_map(|y| (0..24).map(move |x| PixelRequest { x, y, sx: x as f32 + 0.9, sy: y as f32 + 0.1, point: NO_POINT })).collect();
+    // Edge-free pixels: the left half.
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |x, _| x < 12);
+    let pi = c.point_image().clone();
+    let mut averaged = 0;
+    for p in &picks {
+        let i = (p.y * 24 + p.x) as usize;
+        let (slot, anywhere) = crate::sampling::aimed_point(p.point);
+        assert_eq!(slot, pi.point[i], "aimed at the pixel's point");
+        if slot == NO_POINT {
+            continue;
+        }
+        assert_eq!(anywhere, p.x < 12);
+        if anywhere {
+            assert_eq!((p.sx, p.sy), (p.x as f32 + 0.9, p.y as f32 + 0.1), "keeps its jittered position");
+        } else {
+            let [u, v] = pi.subpixel[i];
+            assert!((p.sx - (p.x as f32 + u)).abs() < 1e-4 && (p.sy - (p.y as f32 + v)).abs() < 1e-4, "at the point");
+        }
+        let before = c.point(slot).unwrap();
+        let s = shade(&cam, [p.x, p.y], (p.sx, p.sy), Vec3::splat(1.0), 1);
+        c.insert_aimed(&s, false, p.point);
+        if s.object != before.object || s.hit != before.hit {
+            continue; // another surface: never the same point
+        }
+        let after = c.point(slot).unwrap();
+        assert_eq!(after.position, before.position, "the point stays where it is");
+        assert_eq!(after.samples, 2, "averaged, wherever in the pixel it was shaded");
+        assert!((after.color - Vec3::splat(0.75)).abs().max_element() < 1e-6);
+        averaged += 1;
+    }
+    assert!(averaged >= 300, "most pixels averaged: {averaged}");
+    // Away from the point in a pixel an edge may cross, the same sample is a point of its own.
+    let p = picks.iter().find(|p| p.x == 20 && p.y == 8).unwrap();
+    let slot = c.point_image().point[8 * 24 + 20];
+    let n = c.point(slot).unwrap().samples;
+    let away = shade(&cam, [20, 8], (20.95, 8.05), Vec3::ONE, 1);
+    if (away.position - c.point(slot).unwrap().position).length() > 1e-3 {
+        c.insert_aimed(&away, false, p.point);
+        assert_eq!(c.point(slot).unwrap().samples, n, "not averaged");
+    }
+}
+
+#[test]
 fn picks_aim_only_at_fresh_usable_points() {
     let (w, h) = (12u32, 10u32);
     let cam = camera(w, h);
@@ -256,7 +306,7 @@ fn picks_aim_only_at_fresh_usable_points() {
         .collect();
     let mut picks = jittered.clone();
     // Row 0 unusable (as edge-ambiguous samples are).
-    aim_at_points(&mut picks, &pi, |_, y| y != 0);
+    aim_at_points(&mut picks, &pi, |_, y| y != 0, |_, _| false);
     for (p, j) in picks.iter().zip(&jittered) {
         let i = (p.y * w + p.x) as usize;
         let aimed = pi.point[i] != NO_POINT && p.y != 0;
@@ -271,7 +321,7 @@ fn picks_aim_only_at_fresh_usable_points() {
     c.mark_stale();
     c.reproject_points(&cam, None, &mut StageTimes::new());
     let mut picks = jittered.clone();
-    aim_at_points(&mut picks, c.point_image(), |_, _| true);
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
     assert_eq!(picks, jittered);
 }
 
@@ -305,7 +355,7 @@ fn still_frames_by_noise(gained: bool, frames: u32, sigma_left: f32, sigma_right
         let with_gains = gained && c.update_noise_gains();
         let gains = with_gains.then(|| c.noise_gains());
         sampler.select_gained(c.filter_weights(), &c.point_image().age, gains, &cfg, n_px / 4, &mut picks);
-        aim_at_points(&mut picks, c.point_image(), |_, _| true);
+        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
         for p in &picks {
             c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noise(&mut rng, p.x), 1), false, p.point);
         }
