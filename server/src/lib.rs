@@ -13,6 +13,7 @@
 //!   age, dithered selection of the frame's sample budget (no networking).
 //! - [`image_metrics`] — PSNR / SSIM against reference images.
 //! - [`metrics`] — Prometheus metrics of the pool and the sessions (`--metrics-listen`).
+//! - [`prefetch`] — the software prefetch hint of loops that know their next random reads.
 //! - [`stage_times`] — per-stage frame timing (paper Table 2 columns).
 //! - [`workers`] — the shader-worker pool: discovery (fixed, DNS, file), asynchronous request
 //!   dispatch with back-pressure, adaptive batch sizes, failure handling.
@@ -31,6 +32,7 @@ pub mod encode;
 pub mod epi;
 pub mod image_metrics;
 pub mod metrics;
+pub mod prefetch;
 pub mod reference;
 pub mod render_cache;
 pub mod rng;

@@ -38,6 +38,7 @@
 //! so the tree's answers equal brute force exactly. Builds run in parallel with rayon.
 use super::brute::face_side;
 use super::interval::{IVec3, Interval};
+use crate::prefetch::prefetch_lines as prefetch;
 use edgepoint_scene::{Mesh, Progress};
 use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
@@ -827,21 +828,6 @@ pub enum Visit {
 
 /// Node ranges queued before their blocks are processed (see [`EdgeTree::traverse`]).
 const PIPELINE: usize = 8;
-
-#[inline(always)]
-fn prefetch<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: prefetching is a hint; any address is allowed, this one is valid.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch(x as *const T as *const i8, std::arch::x86_64::_MM_HINT_T0);
-        if std::mem::size_of::<T>() > 64 {
-            std::arch::x86_64::_mm_prefetch((x as *const T as *const i8).add(64), std::arch::x86_64::_MM_HINT_T0);
-            std::arch::x86_64::_mm_prefetch((x as *const T as *const i8).add(128), std::arch::x86_64::_MM_HINT_T0);
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
-}
 
 /// Lays the edges out in blocks: every node's stored edges start a new block. Rewrites the
 /// nodes' edge ranges (item indices) into block ranges.

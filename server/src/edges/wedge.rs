@@ -21,6 +21,7 @@
 //! clipping of [`super::clip1d`], so a wedge costs about what a ray costs.
 use super::events::{Generator, ShadowEvent};
 use super::face_bvh::{Child, FaceBvh};
+use crate::prefetch::prefetch;
 use glam::{DAffine3, DVec2, DVec3, Vec3};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -410,17 +411,6 @@ pub fn search(bvh: &FaceBvh, wedge: &Wedge, exclude: &[u32], out: &mut Vec<Piece
             dirty = true;
         }
     }
-}
-
-#[inline(always)]
-fn prefetch<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: prefetching is a hint; the address is valid.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch(x as *const T as *const i8, std::arch::x86_64::_MM_HINT_T0);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
 }
 
 /// Reusable allocations of [`search`].

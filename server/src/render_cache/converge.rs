@@ -30,6 +30,7 @@
 //! One sample's spread is unknown and a few samples' is itself noisy, so each estimate is
 //! shrunk toward the image's mean variance by [`PRIOR_SAMPLES`] samples' worth.
 use super::{RenderCache, Sample, FLAG_HIT, FLAG_STALE, FLAG_VALID, NO_POINT};
+use crate::prefetch::prefetch;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -72,6 +73,33 @@ impl RenderCache {
             None => return self.insert_aged(s, stale),
         }
         true
+    }
+
+    /// Brings into the cache what [`Self::insert_aimed`] reads and writes of the point a
+    /// request was aimed at (`point` as the request carries it). Points are scattered over
+    /// the pool, so each sample's dozen reads of them would each wait for memory (a fifth of
+    /// the server's time at rest); issued a few samples ahead, the waits overlap.
+    #[inline]
+    pub fn prefetch_aimed(&self, point: u32) {
+        let (point, anywhere) = crate::sampling::aimed_point(point);
+        let i = point as usize;
+        let p = &self.pool;
+        if i >= p.flags.len() {
+            return;
+        }
+        prefetch(&p.flags[i]);
+        prefetch(&p.object[i]);
+        prefetch(&p.epoch[i]);
+        prefetch(&p.samples[i]);
+        prefetch(&p.shade[i]);
+        prefetch(&p.spread[i]);
+        prefetch(&p.stamp[i]);
+        prefetch(&self.proj[i]);
+        if !anywhere {
+            prefetch(&p.px[i]);
+            prefetch(&p.py[i]);
+            prefetch(&p.pz[i]);
+        }
     }
 
     /// Slot `point` and the index of `s`'s pixel, when the last frame showed that point at
