@@ -46,6 +46,7 @@ impl SessionMemory {
             ("sampling priorities", Sampler::bytes_for(width, height)),
             ("sampling picks", Sampler::picks_bytes_for(width, height)),
             ("request ring", RequestRing::bytes_for(ring_capacity(settings, pixels))),
+            ("requests in flight", requests_in_flight(settings, pixels) * REQUEST_IN_FLIGHT_BYTES),
             ("frames in flight", (FRAMES_IN_FLIGHT * 4 + FRAME_BYTES_PER_PIXEL) * pixels),
         ];
         SessionMemory { parts: parts.into_iter().map(|(k, v)| (k, v as u64)).collect() }
@@ -56,11 +57,25 @@ impl SessionMemory {
     }
 }
 
-/// Ring size: all requests that can be outstanding or held (frames of budget, at rest
-/// [`REST_FRAMES`] of them), twice over, so an answer arriving late still finds its request.
-/// (Batches add nothing: a frame's batches hold its picks, and no more are picked.)
+/// Requests a session may have picked and not yet had answered at once, held in the session
+/// or out at the workers: [`super::frame_loop::max_outstanding`]'s largest value, at rest
+/// (frames of budget, [`REST_FRAMES`] of them). A fast pool keeps it there at rest.
+pub fn requests_in_flight(s: &SessionSettings, pixels: usize) -> usize {
+    s.frame_budget(pixels) * OUTSTANDING_FRAMES * REST_FRAMES
+}
+
+/// Bytes a request in flight costs at most: its record in the held batch, its packed copy on
+/// the way to the worker, and its answer packed and unpacked (at 512² and the default
+/// sparseness, 131,072 requests: 40 MB).
+pub const REQUEST_IN_FLIGHT_BYTES: usize = std::mem::size_of::<edgepoint_proto::ShadeRequest>()
+    + edgepoint_proto::packed::REQUEST_BYTES
+    + std::mem::size_of::<edgepoint_proto::Sample>()
+    + edgepoint_proto::packed::SAMPLE_BYTES;
+
+/// Ring size: all requests that can be outstanding or held ([`requests_in_flight`]), twice
+/// over, so an answer arriving late still finds its request.
 pub fn ring_capacity(s: &SessionSettings, pixels: usize) -> usize {
-    2 * s.frame_budget(pixels) * OUTSTANDING_FRAMES * REST_FRAMES
+    2 * requests_in_flight(s, pixels)
 }
 
 fn mib(bytes: u64) -> String {
