@@ -112,7 +112,7 @@ pub fn run(args: SamplingArgs) -> Result<()> {
                         "aim",
                         time(args.iterations, clock, &mut || {
                             out.clone_from(&picked);
-                            aim_at_points(&mut out, points, |_, _| true, |_, _| false);
+                            aim_at_points(&mut out, points, |_, _| true, |_, _, _, _| false);
                         }),
                     );
                     m.insert(

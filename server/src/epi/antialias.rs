@@ -224,6 +224,41 @@ fn exact_area_a(bounds: &Boundaries, pixels: &[EpiPixel], x: usize, y: usize, co
     Some((chord - 0.5 * orient(p, q, corner)).clamp(0.0, 1.0))
 }
 
+/// How far from a simple pixel's edge, in pixels, two positions must both lie for
+/// [`super::Epi::same_side_of_edge`] to put them on one side. The edge is the projection of
+/// the scene's to f32 rounding (about 1e-6 pixel at 512²) and its crossings are stored to
+/// 1/2048 pixel: a sample within this of it may belong to the other side.
+const SIDE_MARGIN: f32 = 1.0 / 256.0;
+
+impl super::Epi {
+    /// Whether positions `a` and `b` of pixel (x, y), in its unit square, lie on one side of
+    /// its edge: for a simple pixel whose crossings have fine positions and which holds no
+    /// segment end (its edge one straight line between the crossings), both at least
+    /// [`SIDE_MARGIN`] from the line on the same side; false for any other pixel. Converging
+    /// at rest uses it to average a sample taken anywhere on a point's side of a simple
+    /// pixel into that point (`sampling::aim_at_points`), so the point tends to that side's
+    /// mean, which the anti-aliasing mixes by the side's exact area.
+    pub fn same_side_of_edge(&self, x: usize, y: usize, a: [f32; 2], b: [f32; 2]) -> bool {
+        if x >= self.width || y >= self.height || self.bounds.holds_end(x, y) {
+            return false;
+        }
+        let px = self.pixels[y * self.width + x];
+        if !px.is_simple() {
+            return false;
+        }
+        let (ea, eb) = PIXEL.ends(px.code());
+        let (Some(p), Some(q)) = (crossing(&self.bounds, x, y, ea), crossing(&self.bounds, x, y, eb)) else {
+            return false;
+        };
+        let len = (q[0] - p[0]).hypot(q[1] - p[1]);
+        if !(len > 0.0) {
+            return false;
+        }
+        let (da, db) = (orient(p, q, a) / len, orient(p, q, b) / len);
+        (da > SIDE_MARGIN && db > SIDE_MARGIN) || (da < -SIDE_MARGIN && db < -SIDE_MARGIN)
+    }
+}
+
 /// Anti-aliases the simple pixels of `image`; returns how many took a secondary colour.
 pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3]) -> u32 {
     let (w, h, words) = (flags.width, flags.height, flags.words);

@@ -209,14 +209,18 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 
 /// Converging at rest (issue 14 item 3, `render_cache/converge.rs`): a pick of a pixel that
 /// shows a fresh point, whose sample the reconstruction can use (`usable(x, y)`), is aimed
-/// at that point (`point`). In a pixel no edge crosses (`anywhere(x, y)`: one surface as far
-/// as the edge-and-point image knows) it keeps its jittered position and is marked
+/// at that point (`point`). Where its jittered position lies in the point's region of the
+/// pixel (`in_region(x, y, jittered, at)`, both positions in the pixel's unit square: a
+/// pixel no edge crosses, one surface as far as the edge-and-point image knows, or the
+/// point's side of a simple pixel's edge) it keeps that position and is marked
 /// [`AIM_IN_PIXEL`]: the cache averages its sample into the point all the same, so the point
 /// converges to the mean of its pixel — what a pixel of the converged reference is — rather
 /// than to the value at the one position it was first shaded at (on `cornell` with `gi` that
 /// difference had held edge-and-point at 49.7–50.1 dB at 30 s with 43–66 samples per pixel; with
-/// it, 50.4–50.6 dB with 43–63). Elsewhere it is aimed at the point's position inside the
-/// pixel instead of a jittered one: the worker shades the same surface point again. A pixel
+/// it, 50.4–50.6 dB with 43–63; in simple pixels, the point converges to its side's mean,
+/// where the reconstruction mixes it by that side's exact area). Elsewhere it is aimed at the
+/// point's position inside the pixel instead of a jittered one: the worker shades the same
+/// surface point again. A pixel
 /// without a point, with a stale one (something changed it: it is replaced, not averaged), or
 /// whose sample is edge-ambiguous or in a complex pixel keeps its jittered position and no
 /// point, so new points still land elsewhere in it.
@@ -224,7 +228,7 @@ pub fn aim_at_points(
     picks: &mut [PixelRequest],
     points: &crate::render_cache::PointImage,
     usable: impl Fn(u32, u32) -> bool + Sync,
-    anywhere: impl Fn(u32, u32) -> bool + Sync,
+    in_region: impl Fn(u32, u32, [f32; 2], [f32; 2]) -> bool + Sync,
 ) {
     let w = points.width as usize;
     // In parallel: each pick reads three arrays of the point image at its own pixel, most of
@@ -235,11 +239,11 @@ pub fn aim_at_points(
             let Some(&point) = points.point.get(i) else { continue };
             if point != NO_POINT && points.age[i] < crate::render_cache::STALE_AGE && usable(p.x, p.y) {
                 debug_assert!(point < AIM_IN_PIXEL, "point slots stay below the flag bit");
-                if anywhere(p.x, p.y) {
+                let at = points.subpixel[i];
+                if in_region(p.x, p.y, [p.sx - p.x as f32, p.sy - p.y as f32], at) {
                     p.point = point | AIM_IN_PIXEL;
                 } else {
-                    let [u, v] = points.subpixel[i];
-                    (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), point);
+                    (p.sx, p.sy, p.point) = (inside_pixel(p.x, at[0]), inside_pixel(p.y, at[1]), point);
                 }
             }
         }

@@ -247,3 +247,48 @@ fn the_closed_form_chord_area_equals_the_clipped_polygon() {
         assert!((got as f64 - want).abs() < 1e-6, "{p:?} on {sp}, {q:?} on {sq}: {got} against {want}");
     }
 }
+
+/// `Epi::same_side_of_edge` against the line itself: in every simple pixel of a random line
+/// across the image, random position pairs both clear of the line by twice the margin are
+/// on one side exactly when the line says so, pairs nearer it never are, and no pixel the
+/// line misses (edge-free) answers true. Without fine positions it answers false.
+#[test]
+fn positions_of_a_simple_pixel_are_on_one_side_of_its_edge_exactly_when_the_line_says_so() {
+    let (w, h) = (40, 32);
+    let mut rng = Rng(11);
+    let mut agreed = 0;
+    for trial in 0..24 {
+        let angle = rng.f64() * std::f64::consts::PI;
+        let centre = [8.0 + rng.f64() * (w as f64 - 16.0), 8.0 + rng.f64() * (h as f64 - 16.0)];
+        let (dx, dy) = (angle.cos() * 100.0, angle.sin() * 100.0);
+        let (p0, p1) = ([centre[0] - dx, centre[1] - dy], [centre[0] + dx, centre[1] + dy]);
+        let points = points_coloured(w, h, &mut rng, |_| Vec3::ONE, |_, _| false);
+        // Signed distance (pixels) of a position of pixel (x, y) from the line.
+        let len = (p1[0] - p0[0]).hypot(p1[1] - p0[1]);
+        let dist = |x: usize, y: usize, u: [f32; 2]| orient(p0, p1, [x as f64 + u[0] as f64, y as f64 + u[1] as f64]) / len;
+        for exact in [true, false] {
+            let (epi, _, _) = reconstruct(w, h, &[(p0, p1)], &points, exact);
+            for y in 0..h {
+                for x in 0..w {
+                    let simple = epi.pixels[y * w + x].is_simple();
+                    for _ in 0..16 {
+                        let (a, b) = ([rng.unit(), rng.unit()], [rng.unit(), rng.unit()]);
+                        let got = epi.same_side_of_edge(x, y, a, b);
+                        let (da, db) = (dist(x, y, a), dist(x, y, b));
+                        if !exact || !simple {
+                            // Only the exact edge of a simple pixel decides; an edge-free
+                            // pixel is the caller's case, not this one's.
+                            assert!(!got, "trial {trial}: pixel ({x},{y}) simple {simple} exact {exact}");
+                        } else if da.abs() > 2.0 * super::SIDE_MARGIN as f64 && db.abs() > 2.0 * super::SIDE_MARGIN as f64 {
+                            assert_eq!(got, (da > 0.0) == (db > 0.0), "trial {trial}: pixel ({x},{y}) at {da} / {db} from the line");
+                            agreed += 1;
+                        } else if da.abs() < 0.5 * super::SIDE_MARGIN as f64 || db.abs() < 0.5 * super::SIDE_MARGIN as f64 {
+                            assert!(!got, "trial {trial}: pixel ({x},{y}) at {da} / {db}: within the margin");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(agreed > 10_000, "{agreed} decided pairs");
+}

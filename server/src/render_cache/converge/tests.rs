@@ -66,7 +66,7 @@ fn aimed_picks(c: &RenderCache, rng: &mut Rng) -> Vec<PixelRequest> {
     for p in &mut picks {
         (p.sx, p.sy) = (p.x as f32 + rng.unit(), p.y as f32 + rng.unit());
     }
-    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _, _, _| false);
     picks
 }
 
@@ -153,7 +153,7 @@ fn a_pixel_s_variance_falls_as_one_over_its_samples_over_still_frames() {
             last_mse = mse;
         }
         sampler.select(c.filter_weights(), &c.point_image().age, &cfg, n_px / 4, &mut picks);
-        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
+        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _, _, _| false);
         for p in &picks {
             c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noisy(&mut rng), 1), false, p.point);
         }
@@ -245,7 +245,7 @@ fn a_point_of_an_edge_free_pixel_averages_samples_from_anywhere_in_its_pixel() {
     let mut picks: Vec<PixelRequest> =
         (0..16).flat_map(|y| (0..24).map(move |x| PixelRequest { x, y, sx: x as f32 + 0.9, sy: y as f32 + 0.1, point: NO_POINT })).collect();
     // Edge-free pixels: the left half.
-    aim_at_points(&mut picks, c.point_image(), |_, _| true, |x, _| x < 12);
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |x, _, _, _| x < 12);
     let pi = c.point_image().clone();
     let mut averaged = 0;
     for p in &picks {
@@ -306,7 +306,7 @@ fn picks_aim_only_at_fresh_usable_points() {
         .collect();
     let mut picks = jittered.clone();
     // Row 0 unusable (as edge-ambiguous samples are).
-    aim_at_points(&mut picks, &pi, |_, y| y != 0, |_, _| false);
+    aim_at_points(&mut picks, &pi, |_, y| y != 0, |_, _, _, _| false);
     for (p, j) in picks.iter().zip(&jittered) {
         let i = (p.y * w + p.x) as usize;
         let aimed = pi.point[i] != NO_POINT && p.y != 0;
@@ -321,7 +321,7 @@ fn picks_aim_only_at_fresh_usable_points() {
     c.mark_stale();
     c.reproject_points(&cam, None, &mut StageTimes::new());
     let mut picks = jittered.clone();
-    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
+    aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _, _, _| false);
     assert_eq!(picks, jittered);
 }
 
@@ -355,7 +355,7 @@ fn still_frames_by_noise(gained: bool, frames: u32, sigma_left: f32, sigma_right
         let with_gains = gained && c.update_noise_gains();
         let gains = with_gains.then(|| c.noise_gains());
         sampler.select_gained(c.filter_weights(), &c.point_image().age, gains, &cfg, n_px / 4, &mut picks);
-        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _| false);
+        aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _, _, _| false);
         for p in &picks {
             c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noise(&mut rng, p.x), 1), false, p.point);
         }
