@@ -34,13 +34,19 @@ fn start_xvfb() -> (Kill, String) {
             continue;
         }
         let child = Command::new("Xvfb")
-            .args([format!(":{d}").as_str(), "-screen", "0", "800x600x24", "-nolisten", "tcp"])
+            // -noreset: an X server resets when its last client disconnects, and a client
+            // connecting meanwhile is refused (the readiness check below is such a client).
+            .args([format!(":{d}").as_str(), "-screen", "0", "800x600x24", "-nolisten", "tcp", "-noreset"])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
             .expect("Xvfb starts");
         let mut k = Kill(child);
-        let up = wait_for(Duration::from_secs(10), || Path::new(&format!("/tmp/.X11-unix/X{d}")).exists());
+        // Its socket appears before it accepts clients: wait until a client connects.
+        let up = wait_for(Duration::from_secs(10), || {
+            Path::new(&format!("/tmp/.X11-unix/X{d}")).exists()
+                && Command::new("xdotool").arg("getdisplaygeometry").env("DISPLAY", format!(":{d}")).output().is_ok_and(|o| o.status.success())
+        });
         if up && k.0.try_wait().unwrap().is_none() {
             return (k, format!(":{d}"));
         }

@@ -12,7 +12,9 @@
 //! sample's position: exact, and O(1). In a pixel no edge crosses, the request is instead
 //! for the point anywhere in its pixel (`sampling::AIM_IN_PIXEL`, a jittered position): a
 //! sample of the same object there is averaged in, and the point converges to its pixel's
-//! mean, as the converged reference's pixel does. The sample is averaged in only while
+//! mean, as the converged reference's pixel does; in a simple pixel, the same for a jittered
+//! position on the point's side of the pixel's edge (`Epi::same_side_of_edge`): the point
+//! converges to its side's mean, which the anti-aliasing weighs by the side's exact area. The sample is averaged in only while
 //! nothing can have changed the point's shading since it was shaded: the point is not stale
 //! (its object moved, a moved object may shadow it) and the sample was shaded at the point's
 //! epoch (no object moved in between). Otherwise the sample replaces the point as a new
