@@ -231,13 +231,27 @@ fn exact_area_a(bounds: &Boundaries, pixels: &[EpiPixel], x: usize, y: usize, co
 const SIDE_MARGIN: f32 = 1.0 / 256.0;
 
 impl super::Epi {
+    /// Whether positions `a` and `b` of pixel (x, y), in its unit square, lie in one region
+    /// of it as far as the edge-and-point image knows: anywhere in a pixel no edge crosses,
+    /// on one side of a simple pixel's edge ([`Self::same_side_of_edge`]), never in a
+    /// complex pixel. Converging at rest uses it to average a sample taken anywhere in a
+    /// point's region into that point (`sampling::aim_at_points`).
+    pub fn same_region(&self, x: usize, y: usize, a: [f32; 2], b: [f32; 2]) -> bool {
+        if self.flags.get(x, y, super::Flags::COMPLEX) {
+            false
+        } else if self.flags.get(x, y, super::Flags::SIMPLE) {
+            self.same_side_of_edge(x, y, a, b)
+        } else {
+            true
+        }
+    }
+
     /// Whether positions `a` and `b` of pixel (x, y), in its unit square, lie on one side of
     /// its edge: for a simple pixel whose crossings have fine positions and which holds no
     /// segment end (its edge one straight line between the crossings), both at least
-    /// [`SIDE_MARGIN`] from the line on the same side; false for any other pixel. Converging
-    /// at rest uses it to average a sample taken anywhere on a point's side of a simple
-    /// pixel into that point (`sampling::aim_at_points`), so the point tends to that side's
-    /// mean, which the anti-aliasing mixes by the side's exact area.
+    /// [`SIDE_MARGIN`] from the line on the same side; false for any other pixel. A point
+    /// averaging samples from its side tends to that side's mean, which the anti-aliasing
+    /// mixes by the side's exact area.
     pub fn same_side_of_edge(&self, x: usize, y: usize, a: [f32; 2], b: [f32; 2]) -> bool {
         if x >= self.width || y >= self.height || self.bounds.holds_end(x, y) {
             return false;

@@ -9,12 +9,13 @@
 //! "Its" point is the one the request was aimed at (the session remembers it with the
 //! request), when the last frame still showed it at the sample's pixel and it lies on the
 //! same object (or is the same background direction) within [`SAME_POINT_RELATIVE`] of the
-//! sample's position: exact, and O(1). In a pixel no edge crosses, the request is instead
-//! for the point anywhere in its pixel (`sampling::AIM_IN_PIXEL`, a jittered position): a
-//! sample of the same object there is averaged in, and the point converges to its pixel's
-//! mean, as the converged reference's pixel does; in a simple pixel, the same for a jittered
-//! position on the point's side of the pixel's edge (`Epi::same_side_of_edge`): the point
-//! converges to its side's mean, which the anti-aliasing weighs by the side's exact area. The sample is averaged in only while
+//! sample's position: exact, and O(1). Where the edge-and-point image puts the pick's jittered
+//! position in the point's region of the pixel (`Epi::same_region`: a pixel no edge crosses,
+//! the point's side of a simple pixel's edge), the request is instead for the point anywhere
+//! there (`sampling::AIM_IN_PIXEL`): a sample of the same object is averaged in, and the
+//! point converges to its region's mean, of which the converged reference's pixel is made
+//! (the anti-aliasing weighs a simple pixel's sides by their exact areas). The sample is
+//! averaged in only while
 //! nothing can have changed the point's shading since it was shaded: the point is not stale
 //! (its object moved, a moved object may shadow it) and the sample was shaded at the point's
 //! epoch (no object moved in between). Otherwise the sample replaces the point as a new
@@ -106,8 +107,8 @@ impl RenderCache {
 
     /// Slot `point` and the index of `s`'s pixel, when the last frame showed that point at
     /// the pixel and `s` is a sample of the same surface point (module doc) — or, when the
-    /// request was for the point `anywhere` in its pixel (`sampling::AIM_IN_PIXEL`: no edge
-    /// crosses the pixel), of the same object anywhere in the pixel.
+    /// request was for the point `anywhere` in its region of the pixel
+    /// (`sampling::AIM_IN_PIXEL`), of the same object.
     fn own_point(&self, s: &Sample, point: u32, anywhere: bool) -> Option<(usize, usize)> {
         let [x, y] = s.pixel;
         if point == NO_POINT || x >= self.cfg.width || y >= self.cfg.height {

@@ -210,20 +210,18 @@ fn inside_pixel(x: u32, u: f32) -> f32 {
 /// Converging at rest (issue 14 item 3, `render_cache/converge.rs`): a pick of a pixel that
 /// shows a fresh point, whose sample the reconstruction can use (`usable(x, y)`), is aimed
 /// at that point (`point`). Where its jittered position lies in the point's region of the
-/// pixel (`in_region(x, y, jittered, at)`, both positions in the pixel's unit square: a
-/// pixel no edge crosses, one surface as far as the edge-and-point image knows, or the
-/// point's side of a simple pixel's edge) it keeps that position and is marked
-/// [`AIM_IN_PIXEL`]: the cache averages its sample into the point all the same, so the point
-/// converges to the mean of its pixel — what a pixel of the converged reference is — rather
-/// than to the value at the one position it was first shaded at (on `cornell` with `gi` that
-/// difference had held edge-and-point at 49.7–50.1 dB at 30 s with 43–66 samples per pixel; with
-/// it, 50.4–50.6 dB with 43–63; in simple pixels, the point converges to its side's mean,
-/// where the reconstruction mixes it by that side's exact area). Elsewhere it is aimed at the
-/// point's position inside the pixel instead of a jittered one: the worker shades the same
-/// surface point again. A pixel
-/// without a point, with a stale one (something changed it: it is replaced, not averaged), or
-/// whose sample is edge-ambiguous or in a complex pixel keeps its jittered position and no
-/// point, so new points still land elsewhere in it.
+/// pixel (`in_region(x, y, jittered, at)`, both positions in the pixel's unit square; the
+/// session asks `Epi::same_region`: anywhere in a pixel no edge crosses, the point's side of
+/// a simple pixel's edge) it keeps that position and is marked [`AIM_IN_PIXEL`]: the cache
+/// averages its sample into the point all the same, so the point converges to the mean of
+/// its region — what the converged reference's pixel is made of — rather than to the value
+/// at the one position it was first shaded at (on `cornell` with `gi` that difference had
+/// held edge-and-point at 49.7–50.1 dB at 30 s with 43–66 samples per pixel; with it,
+/// 50.4–50.6 dB with 43–63). Elsewhere it is aimed at the point's position inside the pixel
+/// instead of a jittered one: the worker shades the same surface point again. A pixel
+/// without a point, with a stale one (something changed it: it is replaced, not averaged),
+/// or whose sample is edge-ambiguous keeps its jittered position and no point, so new
+/// points still land elsewhere in it.
 pub fn aim_at_points(
     picks: &mut [PixelRequest],
     points: &crate::render_cache::PointImage,

@@ -461,11 +461,12 @@ impl FrameLoop {
             // samples (converging at rest); edge-and-point reconstruction uses only usable ones.
             let epr = self.settings.reconstruction == Reconstruction::EdgeAndPoint;
             let (epi, flags) = (&self.epi, self.epi.flags());
-            let at = |x: u32, y: u32, plane: usize| flags.get(x as usize, y as usize, plane);
-            aim_at_points(&mut self.picks, self.cache.point_image(), |x, y| !epr || at(x, y, Flags::USABLE), |x, y, jittered, point| {
-                epr && !at(x, y, Flags::COMPLEX)
-                    && (!at(x, y, Flags::SIMPLE) || epi.same_side_of_edge(x as usize, y as usize, jittered, point))
-            });
+            aim_at_points(
+                &mut self.picks,
+                self.cache.point_image(),
+                |x, y| !epr || flags.get(x as usize, y as usize, Flags::USABLE),
+                |x, y, jittered, point| epr && epi.same_region(x as usize, y as usize, jittered, point),
+            );
         }
         self.after_times.add("sampling", ms_since(t));
 
