@@ -36,7 +36,7 @@
 //!   regions; edge-and-point and Render Cache side by side.
 //! - `rays`: the worker's ray rate (Mrays/s, 1 and 2 threads) on a mesh's primary, shadow
 //!   and incoherent rays and its BVH build time, against the traversal before (and Embree
-//!   with the `embree` feature) in the same process, and the Embree figures.
+//!   libraries named with `--embree`) in the same process, and the Embree figures.
 //! - `split`: split shading by lights against splitting by pixels on the same workers:
 //!   complete samples/s and request-to-sample latency under light and saturated load.
 //! - `simplify`: several lights (paper 003): a session with every shadow edge against one
@@ -128,7 +128,7 @@ enum Cmd {
     /// allocations are findings, kept in the crash corpus.
     Fuzz(fuzz::FuzzArgs),
     /// The worker's ray rate on a mesh (primary, shadow, incoherent rays; 1 and 2 threads) and
-    /// BVH build time, against the traversal before and Embree (feature `embree`).
+    /// BVH build time, against the traversal before and Embree (`--embree LIB`).
     Rays(rays::RaysArgs),
     /// Split shading (paper 004 §4.4) against splitting by pixels on the same workers:
     /// complete samples per second and request-to-complete-sample latency, light and saturated load.

@@ -2,11 +2,10 @@
 //! issue's three workloads — a 1024² pinhole camera's primary rays, shadow rays from their
 //! hits to a point light, 2^20 random incoherent closest-hit rays — one ray at a time, on 1
 //! and 2 threads, with the BVH build time. Baselines in the same process: the worker's
-//! traversal as it was before this work ([`obvhs_baseline`]) and, with the `embree`
-//! feature, Embree 3 from Debian ([`embree`]); the issue's Embree 4.4 figures on this
-//! machine are reported as the constants they are. A subset of every workload is checked
-//! against brute force.
-#[cfg(feature = "embree")]
+//! traversal as it was before this work ([`obvhs_baseline`]) and Embree libraries named with
+//! `--embree` ([`embree`]: Embree 3 from Debian, Embree 4.4 from PyPI's `embreex` wheel, the
+//! version the issue measured); the issue's Embree 4.4 figures on this machine are reported
+//! as the constants they are too. A subset of every workload is checked against brute force.
 mod embree;
 mod obvhs_baseline;
 mod workloads;
@@ -39,6 +38,14 @@ pub struct RaysArgs {
     /// Rays per workload checked against brute force (every triangle, f64).
     #[arg(long, default_value_t = 64)]
     pub verify: usize,
+    /// An Embree shared library to trace the same rays with in this process, one ray at a
+    /// time (repeatable; Embree 3 or 4, told apart by the version the library reports).
+    /// Embree 3: `apt-get install libembree3-3`, then
+    /// /usr/lib/x86_64-linux-gnu/libembree3.so.3. Embree 4.4 (the issue's): `pip download
+    /// --no-deps embreex==4.4.0.post1`, unzip the wheel, and name
+    /// embreex.libs/libembree4-*.so.4 (its TBB beside it is found by the library's own rpath).
+    #[arg(long = "embree", value_name = "LIB")]
+    pub embree: Vec<std::path::PathBuf>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -87,6 +94,7 @@ struct Entry {
     name: &'static str,
     tracer: Box<dyn Tracer>,
     build_ms: Vec<f64>,
+    build_wall_ms: Vec<f64>,
 }
 
 fn pool(threads: usize) -> Result<rayon::ThreadPool> {
@@ -94,22 +102,25 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
 }
 
 /// Runs `build` on a pool of `threads` threads `repeat` times: (the last result, the times
-/// in ms). One thread: process CPU time — one build thread, so CPU time is its time without
-/// the other jobs on a shared machine; it counts Embree's own build thread too. More: wall
-/// clock (CPU time would add the threads up).
-fn timed_builds<T: Send>(repeat: u32, threads: usize, build: impl Fn() -> Result<T> + Sync) -> Result<(T, Vec<f64>)> {
+/// in ms). One thread: the building thread's CPU time — its time without the other jobs on a
+/// shared machine (Embree, told `threads=1`, builds on the calling thread; process CPU time
+/// would also count the task scheduler's idle threads spinning, which made Embree 4's
+/// builds after the first look twice as long as they are); the wall clock beside it. More:
+/// wall clock (CPU time would add the threads up).
+fn timed_builds<T: Send>(repeat: u32, threads: usize, build: impl Fn() -> Result<T> + Sync) -> Result<(T, Vec<f64>, Vec<f64>)> {
     let p = pool(threads)?;
-    let clock = if threads == 1 { crate::clock::process_cpu_ms } else { crate::clock::wall_ms };
-    let mut ms = Vec::new();
+    let (mut ms, mut wall) = (Vec::new(), Vec::new());
     let mut last = None;
     for _ in 0..repeat.max(1) {
         drop(last.take());
-        let t = clock();
-        let built = p.install(&build)?;
-        ms.push(clock() - t);
+        let (t, cpu) = (crate::clock::wall_ms(), p.install(crate::clock::thread_cpu_ms));
+        let (built, cpu_end) = p.install(|| build().map(|b| (b, crate::clock::thread_cpu_ms())))?;
+        let w = crate::clock::wall_ms() - t;
+        ms.push(if threads == 1 { cpu_end - cpu } else { w });
+        wall.push(w);
         last = Some(built);
     }
-    Ok((last.expect("at least one build"), ms))
+    Ok((last.expect("at least one build"), ms, wall))
 }
 
 /// Traces a workload on the current pool: (seconds, hits or occluded rays). On a
@@ -211,38 +222,37 @@ pub fn run(a: RaysArgs) -> Result<()> {
 
     // Builds, one thread each (the issue's build figures are one-thread figures).
     let mut entries = Vec::new();
-    let (worker, ms) = timed_builds(a.repeat, 1, || {
+    let (worker, ms, wall) = timed_builds(a.repeat, 1, || {
         let bvh = SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress);
         let inst = Instances::new(&bvh, &[tf]);
         Ok(WorkerTracer { bvh, inst })
     })?;
     let shape = worker.bvh.objects[0].shape();
-    entries.push(Entry { name: "worker", tracer: Box::new(worker), build_ms: ms });
+    entries.push(Entry { name: "worker", tracer: Box::new(worker), build_ms: ms, build_wall_ms: wall });
     // The worker's traversal with the baseline instruction set (SSE), when the CPU's widest
     // (AVX2 + FMA) is what "worker" runs: the same BVH, built again, untimed.
     if Simd::detect() != Simd::Baseline {
         let bvh = SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress);
         let inst = Instances::new(&bvh, &[tf]).with_simd(Simd::Baseline);
-        entries.push(Entry { name: "worker_sse", tracer: Box::new(WorkerTracer { bvh, inst }), build_ms: vec![] });
+        entries.push(Entry { name: "worker_sse", tracer: Box::new(WorkerTracer { bvh, inst }), build_ms: vec![], build_wall_ms: vec![] });
     }
-    let (base, ms) = timed_builds(a.repeat, 1, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
-    entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms });
-    #[cfg(feature = "embree")]
-    {
-        let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
-        let (e, ms) = timed_builds(a.repeat, 1, || embree::EmbreeMesh::build(&world, &mesh.triangles, 1))?;
-        entries.push(Entry { name: "embree3", tracer: Box::new(e), build_ms: ms });
+    let (base, ms, wall) = timed_builds(a.repeat, 1, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
+    entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms, build_wall_ms: wall });
+    let libraries = a.embree.iter().map(|p| embree::Library::open(p)).collect::<Result<Vec<_>>>()?;
+    let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
+    for lib in &libraries {
+        tracing::info!("Embree {} ({})", lib.version, lib.name);
+        let (e, ms, wall) = timed_builds(a.repeat, 1, || embree::EmbreeMesh::build(lib, &world, &mesh.triangles, 1))?;
+        entries.push(Entry { name: lib.name, tracer: Box::new(e), build_ms: ms, build_wall_ms: wall });
     }
     // Builds on two threads (wall clock; the worker's build splits its subtrees over its
     // pool, Embree builds with two threads of its own).
     let mut builds_2t = serde_json::Map::new();
-    let (_, ms) = timed_builds(a.repeat, 2, || Ok(SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress)))?;
+    let (_, ms, _) = timed_builds(a.repeat, 2, || Ok(SceneBvh::build(&[mesh.as_ref()], &edgepoint_scene::NoProgress)))?;
     builds_2t.insert("worker".into(), json!({"ms_median": crate::stats::median(&ms), "ms": ms}));
-    #[cfg(feature = "embree")]
-    {
-        let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
-        let (_, ms) = timed_builds(a.repeat, 2, || embree::EmbreeMesh::build(&world, &mesh.triangles, 2))?;
-        builds_2t.insert("embree3".into(), json!({"ms_median": crate::stats::median(&ms), "ms": ms}));
+    for lib in &libraries {
+        let (_, ms, _) = timed_builds(a.repeat, 2, || embree::EmbreeMesh::build(lib, &world, &mesh.triangles, 2))?;
+        builds_2t.insert(lib.name.into(), json!({"ms_median": crate::stats::median(&ms), "ms": ms}));
     }
 
     let base = entries.iter().position(|e| e.name == "baseline").context("the baseline tracer")?;
@@ -301,9 +311,11 @@ pub fn run(a: RaysArgs) -> Result<()> {
                 ratios["worker_over_worker_sse"] = json!(mrays[0] / mrays[k]);
                 table.push_str(&format!(", worker SSE {:6.2} ({:4.2}x)", mrays[k], mrays[0] / mrays[k]));
             }
-            if let Some(k) = entries.iter().position(|e| e.name == "embree3") {
-                ratios["worker_over_embree3_same_process"] = json!(mrays[0] / mrays[k]);
-                table.push_str(&format!(", Embree 3 here {:6.2} ({:4.2}x)", mrays[k], mrays[0] / mrays[k]));
+            for lib in &libraries {
+                if let Some(k) = entries.iter().position(|e| e.name == lib.name) {
+                    ratios[format!("worker_over_{}_same_process", lib.name)] = json!(mrays[0] / mrays[k]);
+                    table.push_str(&format!(", Embree {} here {:6.2} ({:4.2}x)", lib.version, mrays[k], mrays[0] / mrays[k]));
+                }
             }
             table.push('\n');
             per_threads.push(json!({
@@ -333,7 +345,10 @@ pub fn run(a: RaysArgs) -> Result<()> {
     let builds: serde_json::Map<_, _> = entries
         .iter()
         .filter(|e| !e.build_ms.is_empty())
-        .map(|e| (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms})))
+        .map(|e| {
+            let wall = json!({"ms_median": crate::stats::median(&e.build_wall_ms), "ms": e.build_wall_ms});
+            (e.name.to_string(), json!({"ms_median": crate::stats::median(&e.build_ms), "ms": e.build_ms, "wall": wall}))
+        })
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
     table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
@@ -342,24 +357,28 @@ pub fn run(a: RaysArgs) -> Result<()> {
         builds_2t.iter().map(|(k, v)| format!("{k} {:.0} ms", v["ms_median"].as_f64().unwrap_or(f64::NAN))).collect::<Vec<_>>().join(", ")
     ));
     table.push_str(&format!("  BVH build, 1 thread: {}\n", entries.iter().filter(|e| !e.build_ms.is_empty()).map(|e| format!("{} {:.0} ms", e.name, crate::stats::median(&e.build_ms))).collect::<Vec<_>>().join(", ")));
+    let mut build_ratios = json!({
+        "worker_over_baseline": wb / crate::stats::median(&entries[base].build_ms),
+        "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,
+        "worker_over_issue_embree44_high": wb / ISSUE_EMBREE_BUILD_MS.1,
+    });
+    for e in entries.iter().filter(|e| e.name.starts_with("embree")) {
+        build_ratios[format!("worker_over_{}_same_process", e.name)] = json!(wb / crate::stats::median(&e.build_ms));
+    }
     let out = json!({
         "mesh": a.mesh.display().to_string(),
         "triangles": mesh.triangles.len(),
         "bounds": [lo.to_array(), hi.to_array()],
         "resolution": a.resolution,
         "repeat": a.repeat.max(1),
-        "timing": "1 thread: CPU time of the tracing thread; 2 threads: wall clock; builds: process CPU time on a one-thread pool",
-        "embree3_in_process": cfg!(feature = "embree"),
+        "timing": "1 thread: CPU time of the tracing thread; 2 threads: wall clock; builds: CPU time of the building thread on a one-thread pool (and, under wall, the wall clock)",
+        "embree_in_process": libraries.iter().map(|l| (l.name.to_string(), json!(l.version))).collect::<serde_json::Map<_, _>>(),
         "worker_simd": format!("{:?}", Simd::detect()),
         "workloads": rows,
         "build_one_thread": builds,
         "build_two_threads_wall": builds_2t,
         "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
-        "build_ratios": {
-            "worker_over_baseline": wb / crate::stats::median(&entries[base].build_ms),
-            "worker_over_issue_embree44_low": wb / ISSUE_EMBREE_BUILD_MS.0,
-            "worker_over_issue_embree44_high": wb / ISSUE_EMBREE_BUILD_MS.1,
-        },
+        "build_ratios": build_ratios,
         "issue_constants": {
             "note": "Measured on this machine by issue 14 item 5 (Embree 4.4, one ray at a time; the worker at main before this work); constants, not measured by this run",
             "embree44_mrays_per_s_1_thread": {"primary": ISSUE_EMBREE_1T[0], "shadow": ISSUE_EMBREE_1T[1], "incoherent": ISSUE_EMBREE_1T[2]},
