@@ -12,7 +12,6 @@ mod tri4;
 mod wide;
 
 use edgepoint_scene::{Mesh, Progress};
-use rayon::prelude::*;
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 #[cfg(target_arch = "x86_64")]
@@ -38,15 +37,12 @@ pub struct ObjectBvh {
 impl ObjectBvh {
     pub fn build(mesh: &Mesh) -> ObjectBvh {
         let start = std::time::Instant::now();
-        // On the caller's rayon pool, as the binary build's subtrees ([`sah_build`]).
-        let boxes: Vec<Aabb> = (0..mesh.triangles.len())
-            .into_par_iter()
-            .map(|f| {
-                let [a, b, c] = mesh.triangle(f).map(Vec3A::from);
-                Aabb::new(a.min(b).min(c), a.max(b).max(c))
-            })
-            .collect();
-        let b2 = wide::build_bvh2(&boxes);
+        // The triangles' boxes on the caller's rayon pool, as the binary build's subtrees
+        // ([`sah_build`]).
+        let b2 = wide::build_bvh2_with(mesh.triangles.len(), |f| {
+            let [a, b, c] = mesh.triangle(f).map(Vec3A::from);
+            Aabb::new(a.min(b).min(c), a.max(b).max(c))
+        });
         let binary = start.elapsed();
         let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&b2);
         let collapsed = start.elapsed();

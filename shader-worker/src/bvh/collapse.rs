@@ -135,11 +135,16 @@ impl Plan {
 
 /// Appends the primitives under `n` to `prims`, left to right.
 fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
+    let leaf_prims = |node: &obvhs::bvh2::node::Bvh2Node| &b2.primitive_indices[node.first_index as usize..(node.first_index + node.prim_count) as usize];
+    // Almost every wide leaf is one binary leaf: no stack for it.
+    if b2.nodes[n].is_leaf() {
+        return prims.extend_from_slice(leaf_prims(&b2.nodes[n]));
+    }
     let mut stack = vec![n];
     while let Some(n) = stack.pop() {
         let node = &b2.nodes[n];
         if node.is_leaf() {
-            prims.extend_from_slice(&b2.primitive_indices[node.first_index as usize..(node.first_index + node.prim_count) as usize]);
+            prims.extend_from_slice(leaf_prims(node));
         } else {
             stack.push(node.first_index as usize + 1);
             stack.push(node.first_index as usize);

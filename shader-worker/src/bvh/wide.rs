@@ -393,6 +393,11 @@ pub fn build_bvh2(boxes: &[Aabb]) -> Bvh2 {
     super::sah_build::build(boxes)
 }
 
+/// [`build_bvh2`] over the boxes `box_of(0..n)`, without an array of them.
+pub fn build_bvh2_with(n: usize, box_of: impl Fn(usize) -> Aabb + Sync) -> Bvh2 {
+    super::sah_build::build_with(n, box_of)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
