@@ -40,41 +40,47 @@ struct Plan {
     split8: Vec<u8>,
 }
 
-/// Primitives under every node and the nodes in an order that puts every parent before
-/// its children (the children of inner node `n` are `first_index` and `first_index + 1`).
-fn counts_and_order(b2: &Bvh2) -> (Vec<u32>, Vec<u32>) {
-    let mut order = Vec::with_capacity(b2.nodes.len());
+/// The binary nodes in an order that puts every node's children before it: index order
+/// backwards when every inner node's children sit after it (as the SAH build lays them
+/// out: then the dynamic program reads the nodes in memory order), else a depth-first
+/// order reversed (the children of inner node `n` are `first_index` and `first_index + 1`).
+fn children_first(b2: &Bvh2) -> Vec<u32> {
+    let n = b2.nodes.len();
+    if b2.nodes.iter().enumerate().all(|(k, node)| node.is_leaf() || node.first_index as usize > k) {
+        return (0..n as u32).rev().collect();
+    }
+    let mut order = Vec::with_capacity(n);
     // An explicit stack: the binary tree may be deep on degenerate meshes.
     let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        order.push(n);
-        let node = &b2.nodes[n as usize];
+    while let Some(k) = stack.pop() {
+        order.push(k);
+        let node = &b2.nodes[k as usize];
         if !node.is_leaf() {
             stack.push(node.first_index);
             stack.push(node.first_index + 1);
         }
     }
-    let mut counts = vec![0u32; b2.nodes.len()];
-    for &n in order.iter().rev() {
-        let node = &b2.nodes[n as usize];
-        counts[n as usize] = if node.is_leaf() { node.prim_count } else { counts[node.first_index as usize] + counts[node.first_index as usize + 1] };
-    }
-    (counts, order)
+    order.reverse();
+    order
 }
 
-fn plan(b2: &Bvh2, counts: &[u32], order: &[u32]) -> Plan {
+fn plan(b2: &Bvh2) -> Plan {
     let n = b2.nodes.len();
     let mut p = Plan { cost: vec![[0.0; 8]; n], choice: vec![[Choice::Leaf; 8]; n], split8: vec![0; n] };
-    for &k in order.iter().rev() {
+    // Primitives under every node, filled as the nodes are planned, children first.
+    let mut counts = vec![0u32; n];
+    for k in children_first(b2) {
         let k = k as usize;
         let node = &b2.nodes[k];
         let area = node.aabb.half_area();
         if node.is_leaf() {
             // A binary leaf (≤ MAX_LEAF primitives) is always a leaf here.
             p.cost[k] = [LEAF_COST * area; 8];
+            counts[k] = node.prim_count;
             continue;
         }
         let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
+        counts[k] = counts[l] + counts[r];
         // dist[j - 1]: the two subtrees spread over j slots (j >= 2). A subtree of c
         // primitives never uses more than c slots (its cost is flat from there), so only
         // splits within both subtrees' counts are tried: most binary nodes are small.
@@ -154,8 +160,7 @@ fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
 
 /// Collapses `b2` (non-empty) into `out`, whose node 0 is the root.
 pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
-    let (counts, order) = counts_and_order(b2);
-    let p = plan(b2, &counts, &order);
+    let p = plan(b2);
     let mut nodes = vec![EMPTY_NODE];
     // The root as a wide node even when the plan would make it one leaf (a mesh of up to
     // four triangles): traversal starts at an inner node.
