@@ -351,7 +351,14 @@ pub fn run(a: RaysArgs) -> Result<()> {
         })
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
-    table.push_str(&format!("  worker BVH: {} nodes, {} levels, {} leaves, {:.2} triangles per leaf\n", shape.nodes, shape.depth, shape.leaves, shape.triangles as f64 / shape.leaves.max(1) as f64));
+    table.push_str(&format!(
+        "  worker BVH: {} nodes, {} levels, {} leaves of {} blocks, {:.2} triangles per leaf\n",
+        shape.nodes,
+        shape.depth,
+        shape.leaves,
+        shape.blocks,
+        shape.triangles as f64 / shape.leaves.max(1) as f64
+    ));
     table.push_str(&format!(
         "  BVH build, 2 threads (wall clock): {}\n",
         builds_2t.iter().map(|(k, v)| format!("{k} {:.0} ms", v["ms_median"].as_f64().unwrap_or(f64::NAN))).collect::<Vec<_>>().join(", ")
@@ -377,7 +384,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "workloads": rows,
         "build_one_thread": builds,
         "build_two_threads_wall": builds_2t,
-        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
+        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "blocks": shape.blocks, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": build_ratios,
         "issue_constants": {
             "note": "Measured on this machine by issue 14 item 5 (Embree 4.4, one ray at a time; the worker at main before this work); constants, not measured by this run",

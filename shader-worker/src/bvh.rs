@@ -21,15 +21,34 @@ pub use node_test::Simd;
 use huge_pages::HugeArray;
 use tri4::{Tri4, TriTest};
 use std::marker::PhantomData;
-use wide::{Bvh8, Bvh8Build, Leaf, LeafSlots, PreparedRay};
+use wide::{leaf_blocks, Bvh8, Bvh8Build, Leaf, LeafSlots, PreparedRay};
 
-/// One object's BVH in object space: an 8-wide tree whose leaves are blocks of up to 4
-/// triangles tested together ([`tri4`]).
+/// An iterator with its length told (a flat map's, which Rust cannot know).
+struct ExactLen<I>(I, usize);
+
+impl<I: Iterator> Iterator for ExactLen<I> {
+    type Item = I::Item;
+    fn next(&mut self) -> Option<I::Item> {
+        let v = self.0.next()?;
+        self.1 -= 1;
+        Some(v)
+    }
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        (self.1, Some(self.1))
+    }
+}
+
+impl<I: Iterator> ExactSizeIterator for ExactLen<I> {}
+
+/// One object's BVH in object space: an 8-wide tree whose leaves are one or two blocks of
+/// up to 4 triangles tested together ([`tri4`]).
 pub struct ObjectBvh {
     bvh: Bvh8,
-    /// One block per leaf (the leaf payload indexes it), holding the mesh's triangle
-    /// indices: a hit needs nothing else. In huge-page-advised memory when large.
+    /// The leaves' blocks, a leaf's next to each other (its payload names the first and
+    /// how many: [`wide::leaf_blocks`]), holding the mesh's triangle indices: a hit needs
+    /// nothing else. In huge-page-advised memory when large.
     blocks: HugeArray<Tri4>,
+    leaves: usize,
     triangles: usize,
     bounds: (Vec3, Vec3),
 }
@@ -44,11 +63,17 @@ impl ObjectBvh {
             Aabb::new(a.min(b).min(c), a.max(b).max(c))
         });
         let binary = start.elapsed();
-        let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&b2);
+        // Leaves of up to two blocks: the surface area heuristic merges small neighbours
+        // into one leaf where a node test over them would cost more (Embree's leaves hold
+        // lists of blocks too).
+        let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&b2, wide::MAX_LEAF_BLOCKS);
         let collapsed = start.elapsed();
-        let blocks = HugeArray::collect(leaves.iter().map(|l: &LeafSlots| {
+        // A leaf's primitives in runs of MAX_LEAF, one block each, in leaf order (the order
+        // the leaf codes number the blocks in).
+        let runs = leaves.iter().flat_map(|l: &LeafSlots| prims[l.first as usize..(l.first + l.count) as usize].chunks(wide::MAX_LEAF as usize));
+        let block_count = leaves.iter().map(|l| l.count.div_ceil(wide::MAX_LEAF) as usize).sum();
+        let blocks = HugeArray::collect(ExactLen(runs, block_count).map(|ids| {
             let mut tris = [(0u32, [Vec3::ZERO; 3]); wide::MAX_LEAF as usize];
-            let ids = &prims[l.first as usize..(l.first + l.count) as usize];
             for (slot, &f) in tris.iter_mut().zip(ids) {
                 *slot = (f, mesh.triangle(f as usize));
             }
@@ -63,7 +88,7 @@ impl ObjectBvh {
             huge_pages = blocks.mapped(),
             "object BVH built"
         );
-        ObjectBvh { bvh, blocks, triangles: prims.len(), bounds: mesh.bounds }
+        ObjectBvh { bvh, blocks, leaves: leaves.len(), triangles: prims.len(), bounds: mesh.bounds }
     }
 
     /// The closest hit in this object with `ray.tmin <= t <= *t`: lowers `*t` to it and
@@ -95,9 +120,23 @@ impl ObjectBvh {
         leaf.hit
     }
 
+    /// Starts loading the blocks of leaf `payload` (a hint).
+    #[inline(always)]
+    fn prefetch_leaf(&self, payload: u32) {
+        let (first, n) = leaf_blocks(payload);
+        if let Some(block) = self.blocks.get(first as usize) {
+            wide::prefetch(block);
+        }
+        if n == 2 {
+            if let Some(block) = self.blocks.get(first as usize + 1) {
+                wide::prefetch(block);
+            }
+        }
+    }
+
     /// The tree's size: what build-quality changes are judged by next to the ray rate.
     pub fn shape(&self) -> BvhShape {
-        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.blocks.len(), triangles: self.triangles }
+        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.leaves, blocks: self.blocks.len(), triangles: self.triangles }
     }
 }
 
@@ -112,21 +151,22 @@ struct ClosestInObject<'a, N> {
 
 impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
     #[inline(always)]
-    fn visit(&mut self, b: u32, t: &mut f32) -> bool {
+    fn visit(&mut self, payload: u32, t: &mut f32) -> bool {
         let r = self.ray;
-        // SAFETY: made only where `N`'s instructions run (see the struct).
-        if let Some((lane, th)) = unsafe { self.object.blocks[b as usize].intersect::<N>(r, *t) } {
-            *t = th;
-            self.best = Some((b, lane));
+        let (first, n) = leaf_blocks(payload);
+        for b in first..first + n {
+            // SAFETY: made only where `N`'s instructions run (see the struct).
+            if let Some((lane, th)) = unsafe { self.object.blocks[b as usize].intersect::<N>(r, *t) } {
+                *t = th;
+                self.best = Some((b, lane));
+            }
         }
         false
     }
 
     #[inline(always)]
-    fn prefetch(&self, b: u32) {
-        if let Some(block) = self.object.blocks.get(b as usize) {
-            wide::prefetch(block);
-        }
+    fn prefetch(&self, payload: u32) {
+        self.object.prefetch_leaf(payload);
     }
 }
 
@@ -140,18 +180,18 @@ struct AnyInObject<'a, N> {
 
 impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
     #[inline(always)]
-    fn visit(&mut self, b: u32, t: &mut f32) -> bool {
+    fn visit(&mut self, payload: u32, t: &mut f32) -> bool {
         let r = self.ray;
+        let (first, n) = leaf_blocks(payload);
+        let blocks = &self.object.blocks;
         // SAFETY: made only where `N`'s instructions run (see `ClosestInObject`).
-        self.hit = unsafe { self.object.blocks[b as usize].any::<N>(r, *t) };
+        self.hit = unsafe { blocks[first as usize].any::<N>(r, *t) || (n == 2 && blocks[first as usize + 1].any::<N>(r, *t)) };
         self.hit
     }
 
     #[inline(always)]
-    fn prefetch(&self, b: u32) {
-        if let Some(block) = self.object.blocks.get(b as usize) {
-            wide::prefetch(block);
-        }
+    fn prefetch(&self, payload: u32) {
+        self.object.prefetch_leaf(payload);
     }
 }
 
@@ -213,6 +253,8 @@ pub struct BvhShape {
     /// Levels of 8-wide nodes.
     pub depth: usize,
     pub leaves: usize,
+    /// Triangle blocks of the leaves (a leaf holds one or two).
+    pub blocks: usize,
     pub triangles: usize,
 }
 
@@ -362,7 +404,7 @@ impl Instances {
     pub fn new(bvh: &SceneBvh, transforms: &[Affine3A]) -> Instances {
         assert_eq!(bvh.objects.len(), transforms.len(), "one transform per object");
         let boxes: Vec<Aabb> = bvh.objects.iter().zip(transforms).map(|(o, t)| world_box(t, o.bounds)).collect();
-        let Bvh8Build { bvh: top, leaves: top_leaves, prims: slot_object } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes));
+        let Bvh8Build { bvh: top, leaves: top_leaves, prims: slot_object } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes), 1);
         Instances {
             top,
             top_leaves,
@@ -491,9 +533,12 @@ impl Instances {
                     let local = Pyramid::transformed(apex, base, &self.to_object[obj as usize]);
                     o.bvh.visit_overlapping(
                         |lo, hi| local.may_overlap(lo, hi),
-                        |b| {
-                            for &t in o.blocks[b as usize].tri.iter().filter(|t| **t != u32::MAX) {
-                                f(obj, t);
+                        |payload| {
+                            let (first, n) = leaf_blocks(payload);
+                            for block in &o.blocks[first as usize..(first + n) as usize] {
+                                for &t in block.tri.iter().filter(|t| **t != u32::MAX) {
+                                    f(obj, t);
+                                }
                             }
                         },
                     );

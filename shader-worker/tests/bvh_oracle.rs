@@ -392,6 +392,9 @@ fn dragon_matches_brute_force() {
     let mesh = dragon.mesh.clone();
     let tf = vec![dragon.transform];
     let bvh = edgepoint_worker::SceneBvh::build(&[mesh.as_ref()], &NoProgress);
+    // Some leaves hold two blocks (the rays below test that path too).
+    let shape = bvh.objects[0].shape();
+    assert!(shape.blocks > shape.leaves, "{} blocks in {} leaves", shape.blocks, shape.leaves);
     let insts: Vec<_> = simds().into_iter().map(|s| edgepoint_worker::Instances::new(&bvh, &tf).with_simd(s)).collect();
     let (lo, hi) = edgepoint_scene::geometry::transformed_box(&tf[0], mesh.bounds);
     let c = (lo + hi) * 0.5;

@@ -8,7 +8,7 @@
 //! binary nodes are opened is chosen by expected cost (area-weighted node and leaf
 //! tests), not greedily by the largest area.
 use super::huge_pages::HugeArray;
-use super::wide::{Bvh8Build, LeafSlots, Node8, EMPTY_NODE, LEAF, MAX_LEAF};
+use super::wide::{leaf_code, Bvh8Build, LeafSlots, Node8, EMPTY_NODE, MAX_LEAF};
 use obvhs::bvh2::Bvh2;
 
 /// Expected cost of visiting an 8-wide node (its 8 slab tests) relative to a leaf block
@@ -64,7 +64,7 @@ fn children_first(b2: &Bvh2) -> Vec<u32> {
     order
 }
 
-fn plan(b2: &Bvh2) -> Plan {
+fn plan(b2: &Bvh2, max_leaf: u32) -> Plan {
     let n = b2.nodes.len();
     let mut p = Plan { cost: vec![[0.0; 8]; n], choice: vec![[Choice::Leaf; 8]; n], split8: vec![0; n] };
     // Primitives under every node, filled as the nodes are planned, children first.
@@ -97,7 +97,8 @@ fn plan(b2: &Bvh2) -> Plan {
                 }
             }
         }
-        let leaf = if counts[k] <= MAX_LEAF { LEAF_COST * area } else { f32::INFINITY };
+        // A leaf of c primitives is ⌈c / MAX_LEAF⌉ blocks tested one after the other.
+        let leaf = if counts[k] <= max_leaf { LEAF_COST * area * counts[k].div_ceil(MAX_LEAF) as f32 } else { f32::INFINITY };
         // With more slots a spread never costs more, so the best is at the most slots.
         let inner = NODE_COST * area + dist[jmax - 1];
         p.split8[k] = dist_k[jmax - 1];
@@ -158,9 +159,12 @@ fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
     }
 }
 
-/// Collapses `b2` (non-empty) into `out`, whose node 0 is the root.
-pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
-    let p = plan(b2);
+/// Collapses `b2` (non-empty) into `out`, whose node 0 is the root, with leaves of up to
+/// `max_leaf` primitives (a multiple of [`MAX_LEAF`]: whole blocks).
+pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build, max_leaf: u32) {
+    let p = plan(b2, max_leaf);
+    // Blocks of the leaves so far: a leaf's code names its first block and how many.
+    let mut blocks = 0u32;
     let mut nodes = vec![EMPTY_NODE];
     // The root as a wide node even when the plan would make it one leaf (a mesh of up to
     // four triangles): traversal starts at an inner node.
@@ -188,8 +192,10 @@ pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build) {
             if p.is_leaf(b2, k) {
                 let first = out.prims.len() as u32;
                 gather(b2, k, &mut out.prims);
-                node.child[i] = LEAF | out.leaves.len() as u32;
-                out.leaves.push(LeafSlots { first, count: out.prims.len() as u32 - first });
+                let count = out.prims.len() as u32 - first;
+                node.child[i] = leaf_code(blocks, count.div_ceil(MAX_LEAF));
+                blocks += count.div_ceil(MAX_LEAF);
+                out.leaves.push(LeafSlots { first, count });
             } else {
                 let child = nodes.len();
                 node.child[i] = child as u32;

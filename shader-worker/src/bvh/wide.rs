@@ -175,19 +175,39 @@ pub struct Bvh8Build {
     pub prims: Vec<u32>,
 }
 
-/// Most primitives in one leaf: one 4-lane triangle block (see `tri4`).
+/// Most primitives in one leaf block: one 4-lane triangle test (see `tri4`).
 pub const MAX_LEAF: u32 = 4;
+/// Most blocks in one leaf (see [`leaf_code`]).
+pub const MAX_LEAF_BLOCKS: u32 = 2;
+/// The bit of a leaf's code that says it holds [`MAX_LEAF_BLOCKS`] blocks instead of one.
+const TWO_BLOCKS: u32 = 1 << 30;
+
+/// The child code of a leaf of `blocks` (1 or 2) consecutive blocks from block `first`:
+/// blocks are numbered in leaf order, so with one block per leaf the first block is the
+/// leaf's own index (the top level's leaves, which index their slots by it).
+pub fn leaf_code(first: u32, blocks: u32) -> u32 {
+    assert!(first < TWO_BLOCKS && (1..=MAX_LEAF_BLOCKS).contains(&blocks), "leaf of {blocks} blocks from block {first}");
+    LEAF | first | if blocks == 2 { TWO_BLOCKS } else { 0 }
+}
+
+/// A leaf payload (its code without [`LEAF`]) as (first block, blocks).
+#[inline(always)]
+pub fn leaf_blocks(payload: u32) -> (u32, u32) {
+    (payload & !TWO_BLOCKS, 1 + (payload >> 30 & 1))
+}
 
 impl Bvh8 {
     /// Collapses a binary BVH (obvhs' type, leaves of at most [`MAX_LEAF`] primitives) into
-    /// 8-wide nodes with leaves of at most [`MAX_LEAF`] primitives, by surface area
-    /// heuristic ([`super::collapse`]). Child boxes are the binary nodes' exact f32 boxes.
-    pub fn from_bvh2(b2: &Bvh2) -> Bvh8Build {
+    /// 8-wide nodes with leaves of at most `max_blocks` blocks of [`MAX_LEAF`] primitives
+    /// (1 or [`MAX_LEAF_BLOCKS`]), by surface area heuristic ([`super::collapse`]). Child
+    /// boxes are the binary nodes' exact f32 boxes; a leaf's code is [`leaf_code`] of its
+    /// blocks, numbered in the order of `leaves`.
+    pub fn from_bvh2(b2: &Bvh2, max_blocks: u32) -> Bvh8Build {
         let mut out = Bvh8Build { bvh: Bvh8 { nodes: HugeArray::collect(std::iter::empty()), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
         if b2.nodes.is_empty() {
             return out;
         }
-        super::collapse::collapse(b2, &mut out);
+        super::collapse::collapse(b2, &mut out, max_blocks.clamp(1, MAX_LEAF_BLOCKS) * MAX_LEAF);
         out
     }
 
@@ -414,7 +434,7 @@ mod tests {
                     Aabb::new(Vec3A::splat(-h), Vec3A::new(h, h * (1.0 + (k % 7) as f32), h))
                 })
                 .collect();
-            let b = Bvh8::from_bvh2(&build_bvh2(&boxes));
+            let b = Bvh8::from_bvh2(&build_bvh2(&boxes), 1);
             let mut seen = vec![0u32; n];
             let ray = PreparedRay::new(Vec3A::new(0.0, 0.0, -100.0), Vec3A::Z, 0.0);
             let mut tmax = f32::INFINITY;
@@ -455,7 +475,7 @@ mod tests {
                 Aabb::new(c, c + Vec3A::new(next(), next(), next()))
             })
             .collect();
-        let b = Bvh8::from_bvh2(&build_bvh2(&boxes));
+        let b = Bvh8::from_bvh2(&build_bvh2(&boxes), 1);
         for _ in 0..50 {
             let qlo = Vec3A::new(next(), next(), next()) * 10.0;
             let qhi = qlo + Vec3A::splat(1.0 + 3.0 * next());
