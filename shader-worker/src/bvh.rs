@@ -155,8 +155,9 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
         let r = self.ray;
         let (first, n) = leaf_blocks(payload);
         for b in first..first + n {
-            // SAFETY: made only where `N`'s instructions run (see the struct).
-            if let Some((lane, th)) = unsafe { self.object.blocks[b as usize].intersect::<N>(r, *t) } {
+            // SAFETY: made only where `N`'s instructions run (see the struct); leaf codes name blocks of this object (built with its
+            // tree), so the index is in bounds (unchecked for the reason of the node's).
+            if let Some((lane, th)) = unsafe { self.object.blocks.get_unchecked(b as usize).intersect::<N>(r, *t) } {
                 *t = th;
                 self.best = Some((b, lane));
             }
@@ -185,7 +186,8 @@ impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
         let (first, n) = leaf_blocks(payload);
         let blocks = &self.object.blocks;
         // SAFETY: made only where `N`'s instructions run (see `ClosestInObject`).
-        self.hit = unsafe { blocks[first as usize].any::<N>(r, *t) || (n == 2 && blocks[first as usize + 1].any::<N>(r, *t)) };
+        // (The blocks unchecked as in `ClosestInObject::visit`.)
+        self.hit = unsafe { blocks.get_unchecked(first as usize).any::<N>(r, *t) || (n == 2 && blocks.get_unchecked(first as usize + 1).any::<N>(r, *t)) };
         self.hit
     }
 

@@ -311,7 +311,10 @@ impl Bvh8 {
                     return;
                 }
             } else {
-                let node = &self.nodes[cur as usize];
+                // SAFETY: inner child codes index `nodes` (the collapse made both), and the
+                // root, node 0, exists (checked in `traverse_stack`). Unchecked: the bound
+                // would hold one more register in the traversal's loop, which spills as it is.
+                let node = unsafe { self.nodes.get_unchecked(cur as usize) };
                 // SAFETY: forwarded from the caller.
                 let (tnear, mut mask) = unsafe { N::intersect(node, ray, *tmax) };
                 if mask != 0 {
