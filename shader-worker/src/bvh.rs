@@ -155,8 +155,9 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
         let r = self.ray;
         let (first, n) = leaf_blocks(payload);
         for b in first..first + n {
-            // SAFETY: made only where `N`'s instructions run (see the struct); leaf codes name blocks of this object (built with its
-            // tree), so the index is in bounds (unchecked for the reason of the node's).
+            // SAFETY: made only where `N`'s instructions run (see the struct); leaf codes name
+            // blocks of this object (built with its tree), so the index is in bounds
+            // (unchecked for the reason the traversal's nodes are).
             if let Some((lane, th)) = unsafe { self.object.blocks.get_unchecked(b as usize).intersect::<N>(r, *t) } {
                 *t = th;
                 self.best = Some((b, lane));
