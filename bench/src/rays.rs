@@ -212,6 +212,8 @@ fn verify(tracer: &dyn Tracer, mesh: &Mesh, tf: Affine3A, w: &Workload, n: usize
 }
 
 pub fn run(a: RaysArgs) -> Result<()> {
+    // The Embree libraries first: a wrong path fails before the mesh is loaded.
+    let libraries = a.embree.iter().map(|p| embree::Library::open(p)).collect::<Result<Vec<_>>>()?;
     let progress = LogProgress::new("rays");
     let scene = edgepoint_scene::load::load_path(&a.mesh, &progress).map_err(|e| anyhow::anyhow!("{e}"))?;
     let object = scene.objects.iter().max_by_key(|o| o.mesh.triangles.len()).context("the file has no mesh")?;
@@ -238,7 +240,6 @@ pub fn run(a: RaysArgs) -> Result<()> {
     }
     let (base, ms, wall) = timed_builds(a.repeat, 1, || Ok(obvhs_baseline::BaselineBvh::build(&mesh, tf)))?;
     entries.push(Entry { name: "baseline", tracer: Box::new(base), build_ms: ms, build_wall_ms: wall });
-    let libraries = a.embree.iter().map(|p| embree::Library::open(p)).collect::<Result<Vec<_>>>()?;
     let world: Vec<Vec3> = mesh.positions.iter().map(|p| tf.transform_point3(*p)).collect();
     for lib in &libraries {
         tracing::info!("Embree {} ({})", lib.version, lib.name);
