@@ -214,6 +214,12 @@ fn verify(tracer: &dyn Tracer, mesh: &Mesh, tf: Affine3A, w: &Workload, n: usize
 pub fn run(a: RaysArgs) -> Result<()> {
     // The Embree libraries first: a wrong path fails before the mesh is loaded.
     let libraries = a.embree.iter().map(|p| embree::Library::open(p)).collect::<Result<Vec<_>>>()?;
+    // Their results are keyed by major version ("embree3", "embree4").
+    for i in 0..libraries.len() {
+        if let Some(j) = (0..i).find(|&j| libraries[j].name == libraries[i].name) {
+            anyhow::bail!("--embree {} and --embree {} are both {}: name one library per major version", a.embree[j].display(), a.embree[i].display(), libraries[i].name);
+        }
+    }
     let progress = LogProgress::new("rays");
     let scene = edgepoint_scene::load::load_path(&a.mesh, &progress).map_err(|e| anyhow::anyhow!("{e}"))?;
     let object = scene.objects.iter().max_by_key(|o| o.mesh.triangles.len()).context("the file has no mesh")?;

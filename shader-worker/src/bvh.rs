@@ -23,23 +23,6 @@ use tri4::{Tri4, TriTest};
 use std::marker::PhantomData;
 use wide::{leaf_blocks, Bvh8, Bvh8Build, Leaf, LeafSlots, PreparedRay};
 
-/// An iterator with its length told (a flat map's, which Rust cannot know).
-struct ExactLen<I>(I, usize);
-
-impl<I: Iterator> Iterator for ExactLen<I> {
-    type Item = I::Item;
-    fn next(&mut self) -> Option<I::Item> {
-        let v = self.0.next()?;
-        self.1 -= 1;
-        Some(v)
-    }
-    fn size_hint(&self) -> (usize, Option<usize>) {
-        (self.1, Some(self.1))
-    }
-}
-
-impl<I: Iterator> ExactSizeIterator for ExactLen<I> {}
-
 /// One object's BVH in object space: an 8-wide tree whose leaves are one or two blocks of
 /// up to 4 triangles tested together ([`tri4`]).
 pub struct ObjectBvh {
@@ -58,7 +41,7 @@ impl ObjectBvh {
         let start = std::time::Instant::now();
         // The triangles' boxes on the caller's rayon pool, as the binary build's subtrees
         // ([`sah_build`]).
-        let b2 = wide::build_bvh2_with(mesh.triangles.len(), |f| {
+        let b2 = sah_build::build_with(mesh.triangles.len(), |f| {
             let [a, b, c] = mesh.triangle(f).map(Vec3A::from);
             Aabb::new(a.min(b).min(c), a.max(b).max(c))
         });
@@ -66,14 +49,11 @@ impl ObjectBvh {
         // Leaves of up to two blocks: the surface area heuristic merges small neighbours
         // into one leaf where a node test over them would cost more (Embree's leaves hold
         // lists of blocks too).
-        let Bvh8Build { bvh, leaves, prims } = Bvh8::from_bvh2(&b2, wide::MAX_LEAF_BLOCKS);
+        let Bvh8Build { bvh, blocks: slots, leaf_count, prims } = Bvh8::from_bvh2(&b2, wide::MAX_LEAF_BLOCKS);
         let collapsed = start.elapsed();
-        // A leaf's primitives in runs of MAX_LEAF, one block each, in leaf order (the order
-        // the leaf codes number the blocks in).
-        let runs = leaves.iter().flat_map(|l: &LeafSlots| prims[l.first as usize..(l.first + l.count) as usize].chunks(wide::MAX_LEAF as usize));
-        let block_count = leaves.iter().map(|l| l.count.div_ceil(wide::MAX_LEAF) as usize).sum();
-        let blocks = HugeArray::collect(ExactLen(runs, block_count).map(|ids| {
+        let blocks = HugeArray::collect(slots.iter().map(|l: &LeafSlots| {
             let mut tris = [(0u32, [Vec3::ZERO; 3]); wide::MAX_LEAF as usize];
+            let ids = &prims[l.first as usize..(l.first + l.count) as usize];
             for (slot, &f) in tris.iter_mut().zip(ids) {
                 *slot = (f, mesh.triangle(f as usize));
             }
@@ -88,7 +68,7 @@ impl ObjectBvh {
             huge_pages = blocks.mapped(),
             "object BVH built"
         );
-        ObjectBvh { bvh, blocks, leaves: leaves.len(), triangles: prims.len(), bounds: mesh.bounds }
+        ObjectBvh { bvh, blocks, leaves: leaf_count, triangles: prims.len(), bounds: mesh.bounds }
     }
 
     /// The closest hit in this object with `ray.tmin <= t <= *t`: lowers `*t` to it and
@@ -407,7 +387,7 @@ impl Instances {
     pub fn new(bvh: &SceneBvh, transforms: &[Affine3A]) -> Instances {
         assert_eq!(bvh.objects.len(), transforms.len(), "one transform per object");
         let boxes: Vec<Aabb> = bvh.objects.iter().zip(transforms).map(|(o, t)| world_box(t, o.bounds)).collect();
-        let Bvh8Build { bvh: top, leaves: top_leaves, prims: slot_object } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes), 1);
+        let Bvh8Build { bvh: top, blocks: top_leaves, prims: slot_object, .. } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes), 1);
         Instances {
             top,
             top_leaves,

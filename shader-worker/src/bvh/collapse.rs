@@ -163,8 +163,6 @@ fn gather(b2: &Bvh2, n: usize, prims: &mut Vec<u32>) {
 /// `max_leaf` primitives (a multiple of [`MAX_LEAF`]: whole blocks).
 pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build, max_leaf: u32) {
     let p = plan(b2, max_leaf);
-    // Blocks of the leaves so far: a leaf's code names its first block and how many.
-    let mut blocks = 0u32;
     let mut nodes = vec![EMPTY_NODE];
     // The root as a wide node even when the plan would make it one leaf (a mesh of up to
     // four triangles): traversal starts at an inner node.
@@ -190,12 +188,14 @@ pub(super) fn collapse(b2: &Bvh2, out: &mut Bvh8Build, max_leaf: u32) {
                 node.planes[2 * a + 1][i] = hi[a];
             }
             if p.is_leaf(b2, k) {
-                let first = out.prims.len() as u32;
+                let (first, first_block) = (out.prims.len() as u32, out.blocks.len() as u32);
                 gather(b2, k, &mut out.prims);
-                let count = out.prims.len() as u32 - first;
-                node.child[i] = leaf_code(blocks, count.div_ceil(MAX_LEAF));
-                blocks += count.div_ceil(MAX_LEAF);
-                out.leaves.push(LeafSlots { first, count });
+                let end = out.prims.len() as u32;
+                // The leaf's primitives in runs of MAX_LEAF, one block each; its code names
+                // the first block and how many.
+                out.blocks.extend((first..end).step_by(MAX_LEAF as usize).map(|s| LeafSlots { first: s, count: (end - s).min(MAX_LEAF) }));
+                node.child[i] = leaf_code(first_block, out.blocks.len() as u32 - first_block);
+                out.leaf_count += 1;
             } else {
                 let child = nodes.len();
                 node.child[i] = child as u32;

@@ -161,17 +161,19 @@ pub struct Bvh8 {
     pub(super) depth: usize,
 }
 
-/// A leaf's primitives: `Bvh8Build::prims[first..first + count]`.
+/// A leaf block's primitives: `Bvh8Build::prims[first..first + count]`.
 pub struct LeafSlots {
     pub first: u32,
     pub count: u32,
 }
 
-/// A built [`Bvh8`] with its leaves (leaf payload `i` is `leaves[i]`) and the original
-/// primitive indices in leaf order.
+/// A built [`Bvh8`] with its leaves' blocks (numbered as the leaf codes number them:
+/// [`leaf_blocks`]; with one block per leaf, leaf payload `i` is `blocks[i]`), how many
+/// leaves hold them, and the original primitive indices in leaf order.
 pub struct Bvh8Build {
     pub bvh: Bvh8,
-    pub leaves: Vec<LeafSlots>,
+    pub blocks: Vec<LeafSlots>,
+    pub leaf_count: usize,
     pub prims: Vec<u32>,
 }
 
@@ -201,9 +203,9 @@ impl Bvh8 {
     /// 8-wide nodes with leaves of at most `max_blocks` blocks of [`MAX_LEAF`] primitives
     /// (1 or [`MAX_LEAF_BLOCKS`]), by surface area heuristic ([`super::collapse`]). Child
     /// boxes are the binary nodes' exact f32 boxes; a leaf's code is [`leaf_code`] of its
-    /// blocks, numbered in the order of `leaves`.
+    /// blocks, numbered in the order of `blocks`.
     pub fn from_bvh2(b2: &Bvh2, max_blocks: u32) -> Bvh8Build {
-        let mut out = Bvh8Build { bvh: Bvh8 { nodes: HugeArray::collect(std::iter::empty()), depth: 0 }, leaves: Vec::new(), prims: Vec::new() };
+        let mut out = Bvh8Build { bvh: Bvh8 { nodes: HugeArray::collect(std::iter::empty()), depth: 0 }, blocks: Vec::new(), leaf_count: 0, prims: Vec::new() };
         if b2.nodes.is_empty() {
             return out;
         }
@@ -416,11 +418,6 @@ pub fn build_bvh2(boxes: &[Aabb]) -> Bvh2 {
     super::sah_build::build(boxes)
 }
 
-/// [`build_bvh2`] over the boxes `box_of(0..n)`, without an array of them.
-pub fn build_bvh2_with(n: usize, box_of: impl Fn(usize) -> Aabb + Sync) -> Bvh2 {
-    super::sah_build::build_with(n, box_of)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -442,7 +439,7 @@ mod tests {
             let ray = PreparedRay::new(Vec3A::new(0.0, 0.0, -100.0), Vec3A::Z, 0.0);
             let mut tmax = f32::INFINITY;
             b.bvh.traverse(&ray, &mut tmax, &mut |leaf, _: &mut f32| {
-                let l = &b.leaves[leaf as usize];
+                let l = &b.blocks[leaf as usize];
                 for &p in &b.prims[l.first as usize..(l.first + l.count) as usize] {
                     seen[p as usize] += 1;
                 }
@@ -485,7 +482,7 @@ mod tests {
             let overlap = |lo: Vec3A, hi: Vec3A| lo.cmple(qhi).all() && qlo.cmple(hi).all();
             let mut found = vec![false; boxes.len()];
             b.bvh.visit_overlapping(overlap, |leaf| {
-                let l = &b.leaves[leaf as usize];
+                let l = &b.blocks[leaf as usize];
                 for &p in &b.prims[l.first as usize..(l.first + l.count) as usize] {
                     found[p as usize] = true;
                 }
