@@ -252,7 +252,7 @@ impl super::Epi {
     /// [`SIDE_MARGIN`] from the line on the same side; false for any other pixel. A point
     /// averaging samples from its side tends to that side's mean, which the anti-aliasing
     /// mixes by the side's exact area.
-    pub fn same_side_of_edge(&self, x: usize, y: usize, a: [f32; 2], b: [f32; 2]) -> bool {
+    fn same_side_of_edge(&self, x: usize, y: usize, a: [f32; 2], b: [f32; 2]) -> bool {
         if x >= self.width || y >= self.height || self.bounds.holds_end(x, y) {
             return false;
         }
