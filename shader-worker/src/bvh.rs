@@ -330,6 +330,9 @@ pub struct Instances {
     single: bool,
     /// The instruction set queries run with.
     simd: Simd,
+    /// The largest absolute coordinate of any box a ray is tested against, world or object
+    /// space (the slab tests' slack scales with it: [`PreparedRay::new`]).
+    extent: f32,
 }
 
 /// A closest hit before it is turned into a [`Hit`]: object, leaf block, lane, t and the
@@ -388,6 +391,10 @@ impl Instances {
         assert_eq!(bvh.objects.len(), transforms.len(), "one transform per object");
         let boxes: Vec<Aabb> = bvh.objects.iter().zip(transforms).map(|(o, t)| world_box(t, o.bounds)).collect();
         let Bvh8Build { bvh: top, blocks: top_leaves, prims: slot_object, .. } = Bvh8::from_bvh2(&wide::build_bvh2(&boxes), 1);
+        let largest = |lo: Vec3A, hi: Vec3A| lo.abs().max(hi.abs()).max_element();
+        let world = boxes.iter().map(|b| largest(b.min, b.max));
+        let local = bvh.objects.iter().map(|o| largest(o.bounds.0.into(), o.bounds.1.into()));
+        let extent = world.chain(local).fold(0.0f32, f32::max);
         Instances {
             top,
             top_leaves,
@@ -397,6 +404,7 @@ impl Instances {
             transforms: transforms.to_vec(),
             single: transforms.len() == 1,
             simd: Simd::detect(),
+            extent,
         }
     }
 
@@ -417,7 +425,7 @@ impl Instances {
     #[inline(always)]
     fn local_ray(&self, obj: u32, ray: &PreparedRay) -> PreparedRay {
         let inv = &self.to_object[obj as usize];
-        PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin)
+        PreparedRay::new(inv.transform_point3a(ray.origin), inv.transform_vector3a(ray.direction), ray.tmin, self.extent)
     }
 
     /// The ray a query starts with: already in the object's space when there is one object
@@ -427,9 +435,9 @@ impl Instances {
     fn start_ray(&self, origin: Vec3, dir: Vec3, tmin: f32) -> PreparedRay {
         if self.single {
             let inv = &self.to_object[0];
-            PreparedRay::new(inv.transform_point3a(origin.into()), inv.transform_vector3a(dir.into()), tmin)
+            PreparedRay::new(inv.transform_point3a(origin.into()), inv.transform_vector3a(dir.into()), tmin, self.extent)
         } else {
-            PreparedRay::new(origin.into(), dir.into(), tmin)
+            PreparedRay::new(origin.into(), dir.into(), tmin, self.extent)
         }
     }
 

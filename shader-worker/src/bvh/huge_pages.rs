@@ -5,10 +5,22 @@
 //! incoherent ray paid a page walk on most node and block visits; in 2 MB pages they are
 //! ~25. Small arrays (a top level, a small mesh) and other systems stay in a `Vec`; when
 //! the kernel gives no huge pages the memory is ordinary and only the advice is lost.
+//!
+//! A dropped array's mapping is kept for the next build ([`Spare`], at most
+//! [`SPARE_BYTES`]): the first touch of fresh memory is most of a build's last phase on
+//! this machine (the kernel clears each huge page, and in a virtual machine the host may
+//! fault it in as well: the dragon's blocks took 28 ms in some builds and 115 ms in others,
+//! every page a huge one). A rebuild (a scene reloaded; the rays bench's repeats) then
+//! writes into memory already mapped, as a `malloc` that reuses freed blocks does for
+//! Embree's builds, whose first build in a process is the slow one too.
 use std::ops::Deref;
 
 /// Arrays at least this large are mapped for huge pages.
 const HUGE_PAGE: usize = 2 << 20;
+/// Most bytes of dropped mappings kept for reuse (the dragon's nodes and blocks are
+/// ~60 MB).
+#[cfg(target_os = "linux")]
+const SPARE_BYTES: usize = 128 << 20;
 
 /// An immutable array of `T`, in huge-page-advised memory when large (see the module).
 pub struct HugeArray<T: Copy> {
@@ -45,8 +57,54 @@ struct Mapping<T> {
 #[cfg(target_os = "linux")]
 impl<T> Drop for Mapping<T> {
     fn drop(&mut self) {
-        // SAFETY: `base`/`map_len` are the mapping made in `Mapping::new`, unmapped once.
-        unsafe { libc::munmap(self.base, self.map_len) };
+        if let Some(unkept) = Spare::keep(self.base as usize, self.map_len) {
+            // SAFETY: `base`/`map_len` are a mapping this array owned, unmapped once (the
+            // spares gave it up).
+            unsafe { libc::munmap(unkept.0 as *mut libc::c_void, unkept.1) };
+        }
+    }
+}
+
+/// Mappings of dropped arrays, as (base address, length), kept for [`Mapping::new`] to
+/// reuse (see the module): up to [`SPARE_BYTES`] in all, the newest kept.
+#[cfg(target_os = "linux")]
+struct Spare;
+
+#[cfg(target_os = "linux")]
+static SPARES: std::sync::Mutex<Vec<(usize, usize)>> = std::sync::Mutex::new(Vec::new());
+
+#[cfg(target_os = "linux")]
+impl Spare {
+    /// Keeps the mapping `(base, len)`; returns the mappings that no longer fit (to unmap).
+    fn keep(base: usize, len: usize) -> Option<(usize, usize)> {
+        if len > SPARE_BYTES {
+            return Some((base, len));
+        }
+        let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
+        spares.push((base, len));
+        let mut total: usize = spares.iter().map(|s| s.1).sum();
+        let mut unkept = Vec::new();
+        while total > SPARE_BYTES {
+            let oldest = spares.remove(0);
+            total -= oldest.1;
+            unkept.push(oldest);
+        }
+        drop(spares);
+        // All but one unmapped here, the last by the caller (usually there is none).
+        let last = unkept.pop();
+        for (b, l) in unkept {
+            // SAFETY: a mapping a dropped array gave up, now in no list.
+            unsafe { libc::munmap(b as *mut libc::c_void, l) };
+        }
+        last
+    }
+
+    /// A kept mapping of at least `len` bytes and at most twice that (a larger one would
+    /// hold memory the array does not use), taken out of the list.
+    fn take(len: usize) -> Option<(usize, usize)> {
+        let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
+        let i = spares.iter().enumerate().filter(|(_, s)| s.1 >= len && s.1 <= 2 * len).min_by_key(|(_, s)| s.1)?.0;
+        Some(spares.swap_remove(i))
     }
 }
 
@@ -59,15 +117,23 @@ impl<T: Copy> Mapping<T> {
         assert!(std::mem::align_of::<T>() <= HUGE_PAGE);
         let bytes = len.checked_mul(std::mem::size_of::<T>())?;
         let map_len = bytes.checked_add(HUGE_PAGE)?;
-        // SAFETY: an anonymous private mapping at an address of the kernel's choosing.
-        let base = unsafe { libc::mmap(std::ptr::null_mut(), map_len, libc::PROT_READ | libc::PROT_WRITE, libc::MAP_PRIVATE | libc::MAP_ANONYMOUS, -1, 0) };
-        if base == libc::MAP_FAILED {
-            return None;
-        }
+        let (base, map_len) = match Spare::take(map_len) {
+            Some((base, kept_len)) => (base as *mut libc::c_void, kept_len),
+            None => {
+                // SAFETY: an anonymous private mapping at an address of the kernel's choosing.
+                let base = unsafe { libc::mmap(std::ptr::null_mut(), map_len, libc::PROT_READ | libc::PROT_WRITE, libc::MAP_PRIVATE | libc::MAP_ANONYMOUS, -1, 0) };
+                if base == libc::MAP_FAILED {
+                    return None;
+                }
+                (base, map_len)
+            }
+        };
         let offset = (HUGE_PAGE - base as usize % HUGE_PAGE) % HUGE_PAGE;
-        // SAFETY: `offset < HUGE_PAGE`, so `data .. data + bytes` lies inside the mapping.
+        // SAFETY: `offset < HUGE_PAGE` and `bytes + HUGE_PAGE <= map_len`, so `data .. data
+        // + bytes` lies inside the mapping.
         let data = unsafe { (base as *mut u8).add(offset) };
-        // Advice only (the kernel may ignore it, e.g. with THP off): nothing to check.
+        // Advice only (the kernel may ignore it, e.g. with THP off): nothing to check. A
+        // reused mapping is advised again over this array's range (the same pages or more).
         // SAFETY: the range lies inside the mapping and starts on a page boundary.
         unsafe { libc::madvise(data as *mut libc::c_void, bytes, libc::MADV_HUGEPAGE) };
         Some(Mapping { base, map_len, data: data as *mut T, len: 0 })
@@ -130,6 +196,23 @@ mod tests {
                 assert_eq!(a.as_ptr() as usize % HUGE_PAGE, 0);
             }
         }
+    }
+
+    /// A dropped array's mapping is reused by the next array of about its size, which holds
+    /// its own values (not the old ones); a smaller array does not take a mapping twice its
+    /// size. (21 MB: no other test here maps that much.)
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_dropped_mapping_is_reused() {
+        let len = (21 << 20) / 8;
+        let a = HugeArray::collect((0..len as u32).map(|i| i as u64 * 3));
+        let at = a.as_ptr() as usize;
+        drop(a);
+        let small = HugeArray::collect((0..len as u32 / 3).map(u64::from));
+        assert_ne!(small.as_ptr() as usize, at, "a third of the size takes a fresh mapping");
+        let b = HugeArray::collect((0..len as u32).map(|i| i as u64 ^ 0xabcdef));
+        assert_eq!(b.as_ptr() as usize, at, "the same size reuses the mapping");
+        assert!(b.iter().copied().eq((0..len as u64).map(|i| i ^ 0xabcdef)));
     }
 
     /// An iterator whose `len` overstates what it yields: the array holds what came.

@@ -39,7 +39,8 @@ impl Simd {
 /// One 8-child slab test.
 pub trait NodeTest {
     /// Entry distances of the 8 children and the mask of those the ray's `[tmin, tmax]`
-    /// meets (an exit distance widened by [`EXIT_SLACK`]).
+    /// meets (`tmax` widened by [`EXIT_SLACK`]; the slab distances conservative by the
+    /// ray's own slack, [`PreparedRay::new`]).
     ///
     /// # Safety
     /// The CPU must support the instructions the implementation uses, and the caller must
@@ -68,15 +69,15 @@ impl NodeTest for Baseline {
         // 8-float plane at offset 0 or 4 (unaligned loads, so alignment does not matter).
         unsafe {
             let (ix, iy, iz) = (_mm_set1_ps(r.inv[0]), _mm_set1_ps(r.inv[1]), _mm_set1_ps(r.inv[2]));
-            let (ox, oy, oz) = (_mm_set1_ps(r.org_inv[0]), _mm_set1_ps(r.org_inv[1]), _mm_set1_ps(r.org_inv[2]));
-            let (t_min, t_max) = (_mm_set1_ps(r.tmin), _mm_set1_ps(tmax));
-            let slack = _mm_set1_ps(EXIT_SLACK);
+            let (ox, oy, oz) = (_mm_set1_ps(r.near_org_inv[0]), _mm_set1_ps(r.near_org_inv[1]), _mm_set1_ps(r.near_org_inv[2]));
+            let (fx, fy, fz) = (_mm_set1_ps(r.far_org_inv[0]), _mm_set1_ps(r.far_org_inv[1]), _mm_set1_ps(r.far_org_inv[2]));
+            let (t_min, t_max) = (_mm_set1_ps(r.tmin), _mm_set1_ps(tmax * EXIT_SLACK));
             for h in 0..2 {
                 let ld = |k: usize| _mm_loadu_ps(p[k].as_ptr().add(4 * h));
                 let slab = |k: usize, inv, oi| _mm_sub_ps(_mm_mul_ps(ld(k), inv), oi);
                 let t0 = _mm_max_ps(_mm_max_ps(slab(nx, ix, ox), slab(2 + ny, iy, oy)), _mm_max_ps(slab(4 + nz, iz, oz), t_min));
-                let t1 = _mm_min_ps(_mm_min_ps(slab(1 - nx, ix, ox), slab(3 - ny, iy, oy)), _mm_min_ps(slab(5 - nz, iz, oz), t_max));
-                let hit = _mm_cmple_ps(t0, _mm_mul_ps(t1, slack));
+                let t1 = _mm_min_ps(_mm_min_ps(slab(1 - nx, ix, fx), slab(3 - ny, iy, fy)), _mm_min_ps(slab(5 - nz, iz, fz), t_max));
+                let hit = _mm_cmple_ps(t0, t1);
                 _mm_storeu_ps(tnear.as_mut_ptr().add(4 * h), t0);
                 mask |= (_mm_movemask_ps(hit) as u32) << (4 * h);
             }
@@ -97,14 +98,15 @@ impl NodeTest for Avx2 {
         // multiple inside a 64-byte aligned node, so the aligned loads are aligned.
         unsafe {
             let (ix, iy, iz) = (_mm256_set1_ps(r.inv[0]), _mm256_set1_ps(r.inv[1]), _mm256_set1_ps(r.inv[2]));
-            let (ox, oy, oz) = (_mm256_set1_ps(r.org_inv[0]), _mm256_set1_ps(r.org_inv[1]), _mm256_set1_ps(r.org_inv[2]));
+            let (ox, oy, oz) = (_mm256_set1_ps(r.near_org_inv[0]), _mm256_set1_ps(r.near_org_inv[1]), _mm256_set1_ps(r.near_org_inv[2]));
+            let (fx, fy, fz) = (_mm256_set1_ps(r.far_org_inv[0]), _mm256_set1_ps(r.far_org_inv[1]), _mm256_set1_ps(r.far_org_inv[2]));
             let ld = |k: usize| _mm256_load_ps(p[k].as_ptr());
-            // plane · inv − origin · inv with one rounding: at least as close as the SSE
-            // form's two, so the same exit slack covers it.
+            // plane · inv − origin · inv with one rounding (the SSE form's two are covered
+            // by the same slack: `PreparedRay::new`).
             let slab = |k: usize, inv, oi| _mm256_fmsub_ps(ld(k), inv, oi);
             let t0 = _mm256_max_ps(_mm256_max_ps(slab(nx, ix, ox), slab(2 + ny, iy, oy)), _mm256_max_ps(slab(4 + nz, iz, oz), _mm256_set1_ps(r.tmin)));
-            let t1 = _mm256_min_ps(_mm256_min_ps(slab(1 - nx, ix, ox), slab(3 - ny, iy, oy)), _mm256_min_ps(slab(5 - nz, iz, oz), _mm256_set1_ps(tmax)));
-            let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, _mm256_mul_ps(t1, _mm256_set1_ps(EXIT_SLACK)));
+            let t1 = _mm256_min_ps(_mm256_min_ps(slab(1 - nx, ix, fx), slab(3 - ny, iy, fy)), _mm256_min_ps(slab(5 - nz, iz, fz), _mm256_set1_ps(tmax * EXIT_SLACK)));
+            let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
             _mm256_storeu_ps(tnear.as_mut_ptr(), t0);
             (tnear, _mm256_movemask_ps(hit) as u32)
         }
@@ -137,17 +139,93 @@ impl NodeTest for Baseline {
         let mut tnear = [0f32; 8];
         let mut mask = 0u32;
         for i in 0..8 {
-            let tx0 = xn[i] * r.inv[0] - r.org_inv[0];
-            let ty0 = yn[i] * r.inv[1] - r.org_inv[1];
-            let tz0 = zn[i] * r.inv[2] - r.org_inv[2];
-            let tx1 = xf[i] * r.inv[0] - r.org_inv[0];
-            let ty1 = yf[i] * r.inv[1] - r.org_inv[1];
-            let tz1 = zf[i] * r.inv[2] - r.org_inv[2];
+            let tx0 = xn[i] * r.inv[0] - r.near_org_inv[0];
+            let ty0 = yn[i] * r.inv[1] - r.near_org_inv[1];
+            let tz0 = zn[i] * r.inv[2] - r.near_org_inv[2];
+            let tx1 = xf[i] * r.inv[0] - r.far_org_inv[0];
+            let ty1 = yf[i] * r.inv[1] - r.far_org_inv[1];
+            let tz1 = zf[i] * r.inv[2] - r.far_org_inv[2];
             let t0 = max(max(tx0, ty0), max(tz0, r.tmin));
-            let t1 = min(min(tx1, ty1), min(tz1, tmax)) * EXIT_SLACK;
+            let t1 = min(min(tx1, ty1), min(tz1, tmax * EXIT_SLACK));
             tnear[i] = t0;
             mask |= ((t0 <= t1) as u32) << i;
         }
         (tnear, mask)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Vec3, Vec3A};
+
+    /// The slab tests are conservative, as [`PreparedRay::new`] argues: against the exact
+    /// ray–box interval (f64, from the same f32 origin and direction), every box the ray
+    /// meets within `[tmin, tmax]` is in the mask, in every form the CPU runs. The boxes
+    /// are the hard cases: flat on one or two axes, far from the coordinates' origin
+    /// relative to their size (so `plane * inv` and `origin * inv` nearly cancel), met by
+    /// rays aimed at their edges and corners from near and far.
+    #[test]
+    fn every_box_the_ray_meets_is_in_the_mask() {
+        let mut s = 0x9e3779b97f4a7c15u64;
+        let mut f = move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut met, mut checked) = (0usize, 0usize);
+        for n in 0..40_000 {
+            let extent = [1.0f32, 600.0, 1e5][n % 3];
+            let mut node = Node8 { planes: [[0.0; 8]; 6], child: [0; 8] };
+            let mut corner = [Vec3A::ZERO; 8];
+            for c in 0..8 {
+                let mut lo = [0f32; 3];
+                let mut hi = [0f32; 3];
+                for a in 0..3 {
+                    let centre = (f() * 2.0 - 1.0) * extent * 0.9;
+                    let half = if (c + a + n) % 4 == 0 { 0.0 } else { f() * extent * 1e-3 };
+                    (lo[a], hi[a]) = (centre - half, centre + half);
+                    node.planes[2 * a][c] = lo[a];
+                    node.planes[2 * a + 1][c] = hi[a];
+                }
+                let pick = |a: usize, bit: usize| if c >> bit & 1 == 0 { lo[a] } else { hi[a] };
+                corner[c] = Vec3A::new(pick(0, 0), pick(1, 1), pick(2, 2));
+            }
+            // Aim at a corner of one child (on its edges and faces when flat), or near it.
+            let target = corner[n % 8] + if n % 5 == 0 { Vec3A::new(f(), f(), f()) * extent * 1e-4 } else { Vec3A::ZERO };
+            let mut d = Vec3A::new(f() * 2.0 - 1.0, f() * 2.0 - 1.0, f() * 2.0 - 1.0);
+            if n % 7 == 0 {
+                d = d * Vec3A::new(1.0, 0.0, 1.0) + Vec3A::new(0.0, 1e-6, 0.0);
+            }
+            let distance = [1e-3f32, 1.0, 50.0][n % 3] * extent;
+            let o = target - d.normalize() * distance;
+            let ray = PreparedRay::new(o, d, 0.0, extent);
+            let tmax = if n % 11 == 0 { distance * 0.5 } else { f32::INFINITY };
+            let mut masks = vec![unsafe { Baseline::intersect(&node, &ray, tmax) }.1];
+            #[cfg(target_arch = "x86_64")]
+            if Simd::Avx2.supported() {
+                // SAFETY: AVX2 and FMA were detected (the intrinsics are called, not inlined,
+                // outside a target-feature function: the same arithmetic).
+                masks.push(unsafe { Avx2::intersect(&node, &ray, tmax) }.1);
+            }
+            let (od, dd) = (Vec3::from(o).as_dvec3(), Vec3::from(d).as_dvec3());
+            for c in 0..8 {
+                let (mut near, mut far) = (0f64, tmax as f64);
+                for a in 0..3 {
+                    let (lo, hi) = (node.planes[2 * a][c] as f64, node.planes[2 * a + 1][c] as f64);
+                    let (t0, t1) = ((lo - od[a]) / dd[a], (hi - od[a]) / dd[a]);
+                    near = near.max(t0.min(t1));
+                    far = far.min(t0.max(t1));
+                }
+                if near <= far {
+                    met += 1;
+                    for m in &masks {
+                        assert!(m >> c & 1 == 1, "case {n}: child {c} met on [{near}, {far}] but not in mask {m:08b}; origin {o}, direction {d}");
+                    }
+                }
+                checked += 1;
+            }
+        }
+        eprintln!("{met} of {checked} children met");
+        assert!(met > 5000, "too few boxes met to test anything: {met} of {checked}");
     }
 }

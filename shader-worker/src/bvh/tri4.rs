@@ -240,7 +240,7 @@ mod tests {
             let o = Vec3A::from(v() * 2.0);
             // Aim near the first triangle so most rays hit something.
             let [a, b, c] = tris[0].1;
-            let ray = PreparedRay::new(o, Vec3A::from((a + b + c) / 3.0 + v() * 0.3) - o, 0.0);
+            let ray = PreparedRay::new(o, Vec3A::from((a + b + c) / 3.0 + v() * 0.3) - o, 0.0, 2.0);
             // A finite tmax on some rays so the distance test is exercised too.
             let tmax = if n % 3 == 0 { 1.0 } else { f32::INFINITY };
             // (name, the SIMD test's distances and mask, the lane-by-lane ones)
