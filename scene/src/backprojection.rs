@@ -140,6 +140,28 @@ impl<'a> Visible<'a> {
         self.pieces.is_empty()
     }
 
+    /// Whether triangle `t` lies wholly outside one side of the pyramid, or wholly beyond
+    /// either end (the light's plane, the point): it would be clipped away whole, so
+    /// [`Self::occlude`] passes it over without the clipping (most triangles that reach it
+    /// only met the pyramid's box), and it hides nothing.
+    pub fn passes_over(&self, t: &[DVec3; 3]) -> bool {
+        let (p, light, h) = (self.p, self.light, self.h);
+        self.sides.iter().any(|m| t.iter().all(|x| m.dot(*x - p) < 0.0)) || t.iter().all(|x| light.height(*x) - LIGHT_GAP * h < 0.0) || t.iter().all(|x| (1.0 - 1e-9) * h - light.height(*x) < 0.0)
+    }
+
+    /// Whether the box `(lo, hi)` lies wholly outside one side of the pyramid, or wholly
+    /// beyond either end: then so does every triangle inside it ([`Self::passes_over`]
+    /// holds for each, tested on the box's corner that is innermost for that plane).
+    pub fn passes_over_box(&self, (lo, hi): (DVec3, DVec3)) -> bool {
+        let (p, light, h) = (self.p, self.light, self.h);
+        // The corner of the box farthest along `m`.
+        let far = |m: DVec3| DVec3::select(m.cmpge(DVec3::ZERO), hi, lo);
+        let corners = [lo, hi].into_iter().flat_map(|a| [DVec3::new(a.x, lo.y, lo.z), DVec3::new(a.x, hi.y, lo.z), DVec3::new(a.x, lo.y, hi.z), DVec3::new(a.x, hi.y, hi.z)]);
+        self.sides.iter().any(|m| m.dot(far(*m) - p) < 0.0)
+            || corners.clone().all(|x| light.height(x) - LIGHT_GAP * h < 0.0)
+            || corners.clone().all(|x| (1.0 - 1e-9) * h - light.height(x) < 0.0)
+    }
+
     /// Removes what triangle `t` hides of the light. Returns whether it hid anything.
     pub fn occlude(&mut self, t: [DVec3; 3]) -> bool {
         if self.pieces.is_empty() {
@@ -167,11 +189,8 @@ impl<'a> Visible<'a> {
     /// or its shadow has no area (seen edge on).
     fn project(&self, t: &[DVec3; 3]) -> Option<Vec<DVec2>> {
         let p = self.p;
-        // A triangle wholly outside one side of the pyramid, or wholly beyond either end,
-        // would be clipped away below: it is passed over without the clipping (most
-        // triangles that reach here only met the pyramid's box).
         let (light, h) = (self.light, self.h);
-        if self.sides.iter().any(|m| t.iter().all(|x| m.dot(*x - p) < 0.0)) || t.iter().all(|x| light.height(*x) - LIGHT_GAP * h < 0.0) || t.iter().all(|x| (1.0 - 1e-9) * h - light.height(*x) < 0.0) {
+        if self.passes_over(t) {
             return None;
         }
         let mut poly = t.to_vec();
@@ -247,6 +266,44 @@ mod tests {
 
     fn unit(r: &mut Rng) -> f64 {
         (r.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// A box passed over means every triangle in it is: random boxes around and beside
+    /// the pyramid from random points under a ceiling light, 40 random triangles in each
+    /// (corners on the box's faces and inside). Some boxes are passed over and some not.
+    #[test]
+    fn a_box_passed_over_passes_its_triangles_over() {
+        let mut r = Rng::new(77);
+        let light = LightPlane::new(&ceiling(0.5, 2.0)).unwrap();
+        let (mut over, mut not) = (0, 0);
+        for _ in 0..3000 {
+            let mut v = |s: f64| DVec3::new(unit(&mut r) * 2.0 - 1.0, unit(&mut r) * 2.0 - 1.0, unit(&mut r) * 2.0 - 1.0) * s;
+            let p = v(1.5) * DVec3::new(1.0, 0.3, 1.0);
+            let Some(vis) = Visible::new(&light, p.as_vec3(), Vec3::Y) else { continue };
+            let (offset, half) = (v(0.5), v(0.2).abs());
+            let along = unit(&mut r) * 1.2 - 0.1;
+            let c = p.lerp(DVec3::new(0.0, 2.0, 0.0), along) + offset;
+            let (lo, hi) = (c - half, c + half);
+            if !vis.passes_over_box((lo, hi)) {
+                not += 1;
+                continue;
+            }
+            over += 1;
+            for _ in 0..40 {
+                let mut corner = || {
+                    let mut x = lo + (hi - lo) * DVec3::new(unit(&mut r), unit(&mut r), unit(&mut r));
+                    // Half the corners on a face of the box (its extremes reached).
+                    let axis = (unit(&mut r) * 6.0) as usize;
+                    if axis < 3 {
+                        x[axis] = if unit(&mut r) < 0.5 { lo[axis] } else { hi[axis] };
+                    }
+                    x
+                };
+                let t = [corner(), corner(), corner()];
+                assert!(vis.passes_over(&t), "box {lo} .. {hi} passed over but not triangle {t:?} (point {p})");
+            }
+        }
+        assert!(over > 300 && not > 300, "{over} boxes passed over, {not} not");
     }
 
     /// A square light of side 2a at height `y`, facing down.

@@ -27,18 +27,11 @@ pub struct FaceBackprojection {
 /// which of them hid something.
 pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blockers: &[u32], q: DVec2, hit: &mut Vec<u32>) -> Option<Visible<'a>> {
     hit.clear();
-    let p = r.to3(q).as_vec3();
-    let mut vis = Visible::new(light, p, r.n.as_vec3())?;
-    // Only triangles meeting the pyramid from the point to the light can hide any of it: a
-    // box test first spares the clipping of the others (the shaft holds far more).
-    let (apex, base) = vis.pyramid();
-    let (lo, hi) = base.iter().fold((apex, apex), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
+    let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
+    let pyramid = pyramid_box(&vis);
     for &t in blockers {
         let tri = g.tri(t);
-        if tri.iter().all(|x| x.x < lo.x) || tri.iter().all(|x| x.x > hi.x) || tri.iter().all(|x| x.y < lo.y) || tri.iter().all(|x| x.y > hi.y) || tri.iter().all(|x| x.z < lo.z) || tri.iter().all(|x| x.z > hi.z) {
-            continue;
-        }
-        if solid::faces_away(g, t, tri, p.as_dvec3()) {
+        if passed_over(g, &vis, pyramid, t, &tri) {
             continue;
         }
         if vis.occlude(tri) {
@@ -49,6 +42,42 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
         }
     }
     Some(vis)
+}
+
+/// The box of the pyramid from the point to the visible light.
+fn pyramid_box(vis: &Visible) -> (DVec3, DVec3) {
+    let (apex, base) = vis.pyramid();
+    base.iter().fold((apex, apex), |(lo, hi), c| (lo.min(*c), hi.max(*c)))
+}
+
+/// Whether [`visible_at`] passes blocker `t` (corners `tri`) over at `vis`'s point without
+/// clipping it: only triangles meeting the pyramid from the point to the light can hide any
+/// of it, and a box test first spares the clipping of the others (the shaft holds far
+/// more); a solid's triangle turned away from the point hides nothing a nearer face of the
+/// solid does not; and one wholly outside a side or an end of the pyramid is clipped away.
+fn passed_over(g: &Geometry, vis: &Visible, (lo, hi): (DVec3, DVec3), t: u32, tri: &[DVec3; 3]) -> bool {
+    tri.iter().all(|x| x.x < lo.x)
+        || tri.iter().all(|x| x.x > hi.x)
+        || tri.iter().all(|x| x.y < lo.y)
+        || tri.iter().all(|x| x.y > hi.y)
+        || tri.iter().all(|x| x.z < lo.z)
+        || tri.iter().all(|x| x.z > hi.z)
+        || solid::faces_away(g, t, *tri, vis.pyramid().0)
+        || vis.passes_over(tri)
+}
+
+/// Whether every triangle of `tris` is passed over at receiver point `q` (see
+/// [`passed_over`]): the visible part computed there with them among the blockers is the
+/// one computed without them, as each is skipped before it can change anything.
+/// `bounds` holds every corner of `tris`: when it lies wholly outside a side or an end of
+/// the pyramid, so does each triangle, and none is looked at.
+pub fn none_can_hide(g: &Geometry, light: &LightPlane, r: &Receiver, tris: &[u32], bounds: (DVec3, DVec3), q: DVec2) -> bool {
+    let Some(vis) = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3()) else { return true };
+    if vis.passes_over_box(bounds) {
+        return true;
+    }
+    let pyramid = pyramid_box(&vis);
+    tris.iter().all(|&t| passed_over(g, &vis, pyramid, t, &g.tri(t)))
 }
 
 impl FaceBackprojection {
