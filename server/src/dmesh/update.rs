@@ -120,8 +120,9 @@ impl DiscontinuityMesh {
             total = total
                 + self.meshes[l]
                     .par_iter_mut()
+                    .zip(self.shaft_boxes[l].par_iter_mut())
                     .enumerate()
-                    .map_init(Scratch::default, |scratch, (t, slot)| {
+                    .map_init(Scratch::default, |scratch, (t, (slot, shaft_box))| {
                         let t = t as u32;
                         let mut s = UpdateStats::default();
                         if only.is_some_and(|o| !o[t as usize]) {
@@ -130,15 +131,15 @@ impl DiscontinuityMesh {
                         if moved.contains(&t) {
                             let t0 = Instant::now();
                             *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
+                            *shaft_box = super::shaft_box(slot);
                             s.receivers_recomputed = 1;
                             s.own_receivers_ns = ns(t0);
-                        } else if let Some(m) = slot.as_mut() {
-                            if overlap((m.shaft.lo, m.shaft.hi), motion) {
-                                s.receivers_in_motion_volume = 1;
-                                if let Some(u) = update_receiver(m, new, light, o, motion, b1, silhouettes, &mut s) {
-                                    **m = u;
-                                    s.receivers_updated = 1;
-                                }
+                        } else if let Some(m) = slot.as_mut().filter(|_| overlap(*shaft_box, motion)) {
+                            // (A receiver whose shaft misses the motion volume is not read.)
+                            s.receivers_in_motion_volume = 1;
+                            if let Some(u) = update_receiver(m, new, light, o, motion, b1, silhouettes, &mut s) {
+                                **m = u;
+                                s.receivers_updated = 1;
                             }
                         }
                         s
@@ -156,11 +157,12 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let t0 = Instant::now();
     let moved = g.object_tris(o);
     let verts = g.object_vertices(o);
-    let (receiver, above, shaft) = frame(g, light, m.receiver.tri, m.receiver.tol)?;
-    // The object's box against the shaft first (most shafts that meet the motion volume
-    // miss the object where it is now), then its triangles one by one.
-    let new_moved: Vec<u32> = if shaft.may_meet_box(new_box, m.receiver.tol) {
-        moved.clone().filter(|t| super::receiver::is_blocker(g, light, &receiver, &shaft, *t)).collect()
+    // The receiver and its shaft are the stored ones (the receiver does not move, nor does
+    // the light): the light above the receiver is clipped again only for a receiver that
+    // changes. The object's box against the shaft first (most shafts that meet the motion
+    // volume miss the object where it is now), then its triangles one by one.
+    let new_moved: Vec<u32> = if m.shaft.may_meet_box(new_box, m.receiver.tol) {
+        moved.clone().filter(|t| super::receiver::is_blocker(g, light, &m.receiver, &m.shaft, *t)).collect()
     } else {
         Vec::new()
     };
@@ -171,6 +173,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         s.scan_ns += ns(t0);
         return None;
     }
+    let (receiver, above, shaft) = frame(g, light, m.receiver.tri, m.receiver.tol)?;
     let mut blockers: Vec<u32> = m.blockers.iter().copied().filter(|t| !moved.contains(t)).chain(new_moved.iter().copied()).collect();
     blockers.sort_unstable();
     s.scan_ns += ns(t0);
