@@ -137,7 +137,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         moves.push(json!({
             "incremental_ms": ti, "full_ms": tf, "speedup": tf / ti, "mismatches": m,
             "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
-            "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "traces_reintersected": stats.traces_reintersected,
+            "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "receivers_kept_in_umbra": stats.receivers_kept_in_umbra, "arrangements_kept": stats.arrangements_kept, "traces_reintersected": stats.traces_reintersected,
             "traces_untouched": stats.traces_untouched,
             "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
             // CPU time of the update's parts, summed over threads.

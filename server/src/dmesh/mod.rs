@@ -117,12 +117,18 @@ impl ReceiverMesh {
 
 /// 1D visibility on every trace and the arrangement of the visible segments.
 pub fn arrange(receiver: &Receiver, traces: &[TraceVis]) -> (Vec<Segment>, Arrangement) {
+    let segments = visible_segments(receiver, traces);
+    let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
+    (segments, arrangement)
+}
+
+/// The visible segments of `traces` (1D visibility), in the traces' order.
+pub fn visible_segments(receiver: &Receiver, traces: &[TraceVis]) -> Vec<Segment> {
     let mut segments = Vec::new();
     for t in traces {
         t.visible(receiver, &mut segments);
     }
-    let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
-    (segments, arrangement)
+    segments
 }
 
 /// One backprojection per bounded face of `arrangement`, from `reuse` (an old face's, by

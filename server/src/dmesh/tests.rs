@@ -5,6 +5,7 @@
 use super::geometry::{edge_key, EdgeKey, Geometry};
 use super::segments::Generator;
 use super::*;
+use super::update::UpdateStats;
 use crate::rng::Rng;
 use edgepoint_scene::backprojection::{irradiance_with_blockers, Visible, LIGHT_GAP};
 use glam::{DVec3, Vec3};
@@ -504,8 +505,8 @@ fn receivers_near(g: &Geometry, o: u32, grow: f64, cap: usize) -> Vec<bool> {
 /// A built-in scene's area lights and, as in the benchmark, 5 %-of-the-diagonal squares for
 /// its point lights; `moves` random moves of object `name` about each pivot (up to 0.1 of
 /// its diagonal per axis and 0.2 rad), each checked against a full recomputation on the
-/// same receivers ([`receivers_near`]); returns the receivers updated.
-fn scene_incremental_equals_full(scene: &edgepoint_scene::Scene, name: &str, grow: f64, cap: usize, moves: usize, seed: u64) -> usize {
+/// same receivers ([`receivers_near`]); returns what the moves touched, summed.
+fn scene_incremental_equals_full(scene: &edgepoint_scene::Scene, name: &str, grow: f64, cap: usize, moves: usize, seed: u64) -> UpdateStats {
     let mut lights = area_lights(scene);
     let (lo, hi) = scene.bounds();
     lights.extend(point_lights_as_squares(scene, 0.05 * (hi - lo).length() as f64));
@@ -515,7 +516,7 @@ fn scene_incremental_equals_full(scene: &edgepoint_scene::Scene, name: &str, gro
     let mut grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
     let mut mesh = DiscontinuityMesh::compute_for(&g, &grid, &lights, tolerance(&g), Some(only));
     let mut r = Rng::new(seed);
-    let mut updated = 0;
+    let mut touched = UpdateStats::default();
     for i in 0..2 * moves {
         let pivot = if i % 2 == 0 { Pivot::Mean } else { Pivot::BoxCentre };
         let (olo, ohi) = g.object_bounds(o);
@@ -524,24 +525,35 @@ fn scene_incremental_equals_full(scene: &edgepoint_scene::Scene, name: &str, gro
         g = new;
         let full = DiscontinuityMesh::compute_for(&g, &Grid::build(&g, GRID_TRIANGLES_PER_VOXEL), &lights, mesh.tol, mesh.only.clone());
         assert_eq!(update::mismatches(&mesh, &full), 0, "{}: move {i} of {name}: {stats:?}", scene.name);
-        updated += stats.receivers_updated;
+        touched = touched + stats;
     }
     assert!(mesh.segment_count() > 0, "{}: no segments on the receivers tested", scene.name);
-    updated
+    touched
 }
 
 #[test]
 fn incremental_update_equals_full_recomputation_in_rooms() {
     let scene = edgepoint_scene::builtin::load("rooms").unwrap();
-    let updated = scene_incremental_equals_full(&scene, "ball4", 1.0, 400, 2, 41);
-    assert!(updated > 5, "{updated} receivers updated");
+    let touched = scene_incremental_equals_full(&scene, "ball4", 1.0, 400, 2, 41);
+    assert!(touched.receivers_updated > 5, "{touched:?}");
+}
+
+/// A small object (a chair) among the other rooms' lights: receivers kept in umbra behind
+/// the walls, arrangements kept where the chair's surfaces do not show, faces kept where
+/// its triangles are passed over — each path taken, and the mesh equal to a full
+/// recomputation.
+#[test]
+fn incremental_update_equals_full_recomputation_for_a_chair_in_rooms() {
+    let scene = edgepoint_scene::builtin::load("rooms").unwrap();
+    let touched = scene_incremental_equals_full(&scene, "chair4a", 1.5, 400, 2, 53);
+    assert!(touched.receivers_updated > 5 && touched.receivers_kept_in_umbra > 0 && touched.arrangements_kept > 0 && touched.faces_kept > 0, "{touched:?}");
 }
 
 #[test]
 fn incremental_update_equals_full_recomputation_in_chains() {
     let scene = edgepoint_scene::builtin::load("chains").unwrap();
-    let updated = scene_incremental_equals_full(&scene, "chain1-link3", 0.5, 400, 2, 43);
-    assert!(updated > 5, "{updated} receivers updated");
+    let touched = scene_incremental_equals_full(&scene, "chain1-link3", 0.5, 400, 2, 43);
+    assert!(touched.receivers_updated > 5, "{touched:?}");
 }
 
 /// Needs the shared data's dragon (skipped, saying so, without it).
@@ -553,8 +565,8 @@ fn incremental_update_equals_full_recomputation_on_the_grid_over_the_dragon() {
         return;
     }
     let scene = edgepoint_scene::data::load_builtin("grid-dragon", Some(&data), &edgepoint_scene::NoProgress).unwrap();
-    let updated = scene_incremental_equals_full(&scene, "grid", 0.3, 400, 2, 47);
-    assert!(updated > 5, "{updated} receivers updated");
+    let touched = scene_incremental_equals_full(&scene, "grid", 0.3, 400, 2, 47);
+    assert!(touched.receivers_updated > 5, "{touched:?}");
 }
 
 /// Receivers found in umbra behind one flat occluder see none of the light: at random points

@@ -24,15 +24,16 @@ use super::geometry::Geometry;
 use super::grid::Grid;
 use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
-use super::{arrange, face_backprojections, frame, umbra, DiscontinuityMesh, ReceiverMesh, Scratch};
+use super::segments::Segment;
+use super::{arrangement, face_backprojections, frame, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::time::Instant;
 
 /// What one move touched, and where its time went (CPU nanoseconds summed over threads,
-/// for the benchmark's breakdown; no test looks at them).
+/// for the benchmark's breakdown; no test looks at the times).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct UpdateStats {
     /// Static receivers whose shaft meets the motion volume (looked at).
@@ -44,6 +45,10 @@ pub struct UpdateStats {
     /// Static receivers in umbra behind one occluder before or after the move, rebuilt
     /// from their blockers.
     pub receivers_rebuilt: usize,
+    /// Static receivers in umbra before behind an occluder that did not move: kept.
+    pub receivers_kept_in_umbra: usize,
+    /// Updated receivers whose segments came out the same: their arrangement kept.
+    pub arrangements_kept: usize,
     /// Static traces re-intersected with the moved object (their surface crosses the
     /// motion volume).
     pub traces_reintersected: usize,
@@ -76,7 +81,7 @@ macro_rules! add_fields {
 impl std::ops::Add for UpdateStats {
     type Output = UpdateStats;
     fn add(self, o: UpdateStats) -> UpdateStats {
-        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, traces_reintersected, traces_untouched, traces_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, arrangement_ns, faces_ns)
+        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, receivers_kept_in_umbra, arrangements_kept, traces_reintersected, traces_untouched, traces_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, arrangement_ns, faces_ns)
     }
 }
 
@@ -109,43 +114,44 @@ impl DiscontinuityMesh {
         let motion = (b0.0.min(b1.0) - self.tol, b0.1.max(b1.1) + self.tol);
         let tol = self.tol;
         let only = self.only.as_deref();
-        let mut total = UpdateStats::default();
-        for (l, light) in self.lights.iter().enumerate() {
-            // The moved object's silhouette edges from each light corner, once for every
-            // receiver (dynamic VE surfaces are traced from those only).
-            let t0 = Instant::now();
-            let silhouettes = Silhouettes::new(new, light, moved.clone(), tol);
-            total.recast_ns += ns(t0);
-            let silhouettes = &silhouettes;
-            total = total
-                + self.meshes[l]
-                    .par_iter_mut()
-                    .zip(self.shaft_boxes[l].par_iter_mut())
-                    .enumerate()
-                    .map_init(Scratch::default, |scratch, (t, (slot, shaft_box))| {
-                        let t = t as u32;
-                        let mut s = UpdateStats::default();
-                        if only.is_some_and(|o| !o[t as usize]) {
-                            return s;
+        // The moved object's silhouette edges from each light corner, once per light for
+        // every receiver (dynamic VE surfaces are traced from those only).
+        let t0 = Instant::now();
+        let silhouettes: Vec<Silhouettes> = self.lights.iter().map(|light| Silhouettes::new(new, light, moved.clone(), tol)).collect();
+        let mut total = UpdateStats { recast_ns: ns(t0), ..UpdateStats::default() };
+        let (lights, silhouettes) = (&self.lights, &silhouettes);
+        // Every light's receivers in one parallel pass: a small object's work is a few
+        // hundred receivers a light, too little to keep two threads busy light by light.
+        total = total
+            + self
+                .meshes
+                .par_iter_mut()
+                .zip(self.shaft_boxes.par_iter_mut())
+                .enumerate()
+                .flat_map(|(l, (meshes, boxes))| meshes.par_iter_mut().zip(boxes.par_iter_mut()).enumerate().map(move |(t, x)| (l, t as u32, x)))
+                .map_init(Scratch::default, |scratch, (l, t, (slot, shaft_box))| {
+                    let mut s = UpdateStats::default();
+                    if only.is_some_and(|o| !o[t as usize]) {
+                        return s;
+                    }
+                    let light = &lights[l];
+                    if moved.contains(&t) {
+                        let t0 = Instant::now();
+                        *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
+                        *shaft_box = super::shaft_box(slot);
+                        s.receivers_recomputed = 1;
+                        s.own_receivers_ns = ns(t0);
+                    } else if let Some(m) = slot.as_mut().filter(|_| overlap(*shaft_box, motion)) {
+                        // (A receiver whose shaft misses the motion volume is not read.)
+                        s.receivers_in_motion_volume = 1;
+                        if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
+                            **m = u;
+                            s.receivers_updated = 1;
                         }
-                        if moved.contains(&t) {
-                            let t0 = Instant::now();
-                            *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
-                            *shaft_box = super::shaft_box(slot);
-                            s.receivers_recomputed = 1;
-                            s.own_receivers_ns = ns(t0);
-                        } else if let Some(m) = slot.as_mut().filter(|_| overlap(*shaft_box, motion)) {
-                            // (A receiver whose shaft misses the motion volume is not read.)
-                            s.receivers_in_motion_volume = 1;
-                            if let Some(u) = update_receiver(m, new, light, o, motion, b1, silhouettes, &mut s) {
-                                **m = u;
-                                s.receivers_updated = 1;
-                            }
-                        }
-                        s
-                    })
-                    .reduce(UpdateStats::default, |a, b| a + b);
-        }
+                    }
+                    s
+                })
+                .reduce(UpdateStats::default, |a, b| a + b);
         total
     }
 }
@@ -177,7 +183,15 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let mut blockers: Vec<u32> = m.blockers.iter().copied().filter(|t| !moved.contains(t)).chain(new_moved.iter().copied()).collect();
     blockers.sort_unstable();
     s.scan_ns += ns(t0);
-    // In umbra before (no traces kept) or after the move: decided and built afresh.
+    // In umbra before behind a static occluder: it still hides the whole light (neither it,
+    // the light nor the receiver moved, and it is still a blocker), so the mesh is still
+    // the one dark face; only the blockers change. (A full computation may name another
+    // occluder, the first of the blockers that covers: the same mesh.)
+    if m.umbra && !m.faces.iter().any(|f| f.occluders.iter().any(|t| moved.contains(t))) {
+        s.receivers_kept_in_umbra += 1;
+        return Some(ReceiverMesh { receiver: m.receiver.clone(), shaft: m.shaft.clone(), blockers, traces: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
+    }
+    // In umbra before behind the object, or in umbra after: decided and built afresh.
     if m.umbra || umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol).is_some() {
         let t0 = Instant::now();
         let mesh = ReceiverMesh::from_blockers(g, light, &above, receiver, shaft, blockers);
@@ -222,7 +236,17 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     super::segments::canonical_order(&mut out);
     s.recast_ns += ns(t0);
     let t0 = Instant::now();
-    let (segments, arrangement) = arrange(&receiver, &out);
+    // The arrangement is a function of the receiver's corners and its segments: when 1D
+    // visibility gives the old segments bit for bit (the object is among the blockers but
+    // none of its surfaces shows, nor did one before, and it hides no static segment), the
+    // old arrangement is the new one.
+    let segments = visible_segments(&receiver, &out);
+    let arrangement = if same_segments(&segments, &m.segments) {
+        s.arrangements_kept += 1;
+        m.arrangement.clone()
+    } else {
+        arrangement::build(&receiver.corners, &segments, receiver.tol)
+    };
     s.arrangement_ns += ns(t0);
     // Faces: keep the backprojection of a face that is still there and whose view of the
     // light the motion volume does not reach.
@@ -268,6 +292,12 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     s.faces_recomputed += redone;
     s.faces_ns += ns(t0);
     Some(ReceiverMesh { receiver, shaft, blockers, traces: out, segments, arrangement, faces, umbra: false })
+}
+
+/// Whether two segment lists are the same, generators and ends bit for bit, in order.
+fn same_segments(a: &[Segment], b: &[Segment]) -> bool {
+    let bits = |p: DVec2| (p.x.to_bits(), p.y.to_bits());
+    a.len() == b.len() && a.iter().zip(b).all(|(s, t)| s.generator == t.generator && bits(s.a) == bits(t.a) && bits(s.b) == bits(t.b))
 }
 
 /// Receivers whose incremental mesh differs from the full recomputation's: in umbra in one
