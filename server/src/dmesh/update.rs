@@ -231,8 +231,12 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let mut fresh = Vec::new();
     traces_with(g, light, &above, &receiver, &new_moved, Some(silhouettes), &mut fresh);
     s.traces_recast += fresh.len();
-    let runs = Runs::new(g, &blockers);
-    out.extend(fresh.into_iter().map(|t| TraceVis::new(g, &receiver, t, &runs)));
+    // The blockers' runs only for traces to intersect (most receivers the object's shaft
+    // reaches get none from it: building the runs reads every blocker).
+    if !fresh.is_empty() {
+        let runs = Runs::new(g, &blockers);
+        out.extend(fresh.into_iter().map(|t| TraceVis::new(g, &receiver, t, &runs)));
+    }
     super::segments::canonical_order(&mut out);
     s.recast_ns += ns(t0);
     let t0 = Instant::now();
