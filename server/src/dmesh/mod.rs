@@ -180,16 +180,6 @@ pub struct DiscontinuityMesh {
     pub tol: f64,
     /// The receivers meshed, when not every triangle ([`DiscontinuityMesh::compute_for`]).
     pub only: Option<Vec<bool>>,
-    /// `shaft_boxes[l][t]`: the box of `meshes[l][t]`'s shaft (an empty box for none). An
-    /// update's first test, whether a receiver's shaft meets the motion volume, reads these
-    /// side by side rather than each receiver's mesh behind its pointer (a cache miss per
-    /// receiver: 5 ms a light on `rooms`' 55,000 triangles, most of a small object's move).
-    shaft_boxes: Vec<Vec<(DVec3, DVec3)>>,
-}
-
-/// The box of a receiver's shaft, or an empty one for none.
-fn shaft_box(m: &Option<Box<ReceiverMesh>>) -> (DVec3, DVec3) {
-    m.as_ref().map_or((DVec3::INFINITY, DVec3::NEG_INFINITY), |m| (m.shaft.lo, m.shaft.hi))
 }
 
 /// The area lights of a scene as light planes (point and spot lights have no mesh).
@@ -254,7 +244,7 @@ impl DiscontinuityMesh {
     /// still blocks): for scenes too large to mesh whole in a test or a short benchmark run.
     /// Updates keep to the same receivers.
     pub fn compute_for(g: &Geometry, grid: &Grid, lights: &[LightPlane], tol: f64, only: Option<Vec<bool>>) -> DiscontinuityMesh {
-        let meshes: Vec<Vec<Option<Box<ReceiverMesh>>>> = lights
+        let meshes = lights
             .iter()
             .map(|light| {
                 (0..g.tris.len() as u32)
@@ -268,8 +258,7 @@ impl DiscontinuityMesh {
                     .collect()
             })
             .collect();
-        let shaft_boxes = meshes.iter().map(|per_light| per_light.iter().map(shaft_box).collect()).collect();
-        DiscontinuityMesh { lights: lights.to_vec(), meshes, tol, only, shaft_boxes }
+        DiscontinuityMesh { lights: lights.to_vec(), meshes, tol, only }
     }
 
     /// Whether triangle `t` is one of the receivers meshed.

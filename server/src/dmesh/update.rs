@@ -25,7 +25,8 @@ use super::grid::Grid;
 use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
 use super::segments::Segment;
-use super::{arrangement, face_backprojections, frame, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
+use super::receiver::LightAbove;
+use super::{arrangement, face_backprojections, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -126,10 +127,9 @@ impl DiscontinuityMesh {
             + self
                 .meshes
                 .par_iter_mut()
-                .zip(self.shaft_boxes.par_iter_mut())
                 .enumerate()
-                .flat_map(|(l, (meshes, boxes))| meshes.par_iter_mut().zip(boxes.par_iter_mut()).enumerate().map(move |(t, x)| (l, t as u32, x)))
-                .map_init(Scratch::default, |scratch, (l, t, (slot, shaft_box))| {
+                .flat_map(|(l, meshes)| meshes.par_iter_mut().enumerate().map(move |(t, slot)| (l, t as u32, slot)))
+                .map_init(Scratch::default, |scratch, (l, t, slot)| {
                     let mut s = UpdateStats::default();
                     if only.is_some_and(|o| !o[t as usize]) {
                         return s;
@@ -138,11 +138,9 @@ impl DiscontinuityMesh {
                     if moved.contains(&t) {
                         let t0 = Instant::now();
                         *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
-                        *shaft_box = super::shaft_box(slot);
                         s.receivers_recomputed = 1;
                         s.own_receivers_ns = ns(t0);
-                    } else if let Some(m) = slot.as_mut().filter(|_| overlap(*shaft_box, motion)) {
-                        // (A receiver whose shaft misses the motion volume is not read.)
+                    } else if let Some(m) = slot.as_mut().filter(|m| overlap((m.shaft.lo, m.shaft.hi), motion)) {
                         s.receivers_in_motion_volume = 1;
                         if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
                             **m = u;
@@ -179,7 +177,10 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         s.scan_ns += ns(t0);
         return None;
     }
-    let (receiver, above, shaft) = frame(g, light, m.receiver.tri, m.receiver.tol)?;
+    // The stored receiver and shaft are what `frame` would make again (neither the receiver
+    // nor the light moved); only the light above the receiver is needed anew.
+    let above = LightAbove::new(light, &m.receiver)?;
+    let (receiver, shaft) = (m.receiver.clone(), m.shaft.clone());
     let mut blockers: Vec<u32> = m.blockers.iter().copied().filter(|t| !moved.contains(t)).chain(new_moved.iter().copied()).collect();
     blockers.sort_unstable();
     s.scan_ns += ns(t0);
@@ -189,7 +190,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // occluder, the first of the blockers that covers: the same mesh.)
     if m.umbra && !m.faces.iter().any(|f| f.occluders.iter().any(|t| moved.contains(t))) {
         s.receivers_kept_in_umbra += 1;
-        return Some(ReceiverMesh { receiver: m.receiver.clone(), shaft: m.shaft.clone(), blockers, traces: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
+        return Some(ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
     }
     // In umbra before behind the object, or in umbra after: decided and built afresh.
     if m.umbra || umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol).is_some() {
