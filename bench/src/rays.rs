@@ -359,12 +359,13 @@ pub fn run(a: RaysArgs) -> Result<()> {
         .collect();
     let wb = crate::stats::median(&entries[0].build_ms);
     table.push_str(&format!(
-        "  worker BVH: {} nodes, {} levels, {} leaves of {} blocks, {:.2} triangles per leaf\n",
+        "  worker BVH: {} nodes, {} levels, {} leaves of {} blocks, {:.2} triangles per leaf, SAH cost {:.3} (as Embree's statistics count it: verbose=2)\n",
         shape.nodes,
         shape.depth,
         shape.leaves,
         shape.blocks,
-        shape.triangles as f64 / shape.leaves.max(1) as f64
+        shape.triangles as f64 / shape.leaves.max(1) as f64,
+        shape.sah
     ));
     table.push_str(&format!(
         "  BVH build, 2 threads (wall clock): {}\n",
@@ -391,7 +392,7 @@ pub fn run(a: RaysArgs) -> Result<()> {
         "workloads": rows,
         "build_one_thread": builds,
         "build_two_threads_wall": builds_2t,
-        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "blocks": shape.blocks, "triangles": shape.triangles, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
+        "worker_bvh": {"nodes": shape.nodes, "depth": shape.depth, "leaves": shape.leaves, "blocks": shape.blocks, "triangles": shape.triangles, "sah": shape.sah, "triangles_per_leaf": shape.triangles as f64 / shape.leaves.max(1) as f64},
         "build_ratios": build_ratios,
         "issue_constants": {
             "note": "Measured on this machine by issue 14 item 5 (Embree 4.4, one ray at a time; the worker at main before this work); constants, not measured by this run",

@@ -116,7 +116,7 @@ impl ObjectBvh {
 
     /// The tree's size: what build-quality changes are judged by next to the ray rate.
     pub fn shape(&self) -> BvhShape {
-        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.leaves, blocks: self.blocks.len(), triangles: self.triangles }
+        BvhShape { nodes: self.bvh.node_count(), depth: self.bvh.depth(), leaves: self.leaves, blocks: self.blocks.len(), triangles: self.triangles, sah: self.bvh.sah() }
     }
 }
 
@@ -150,6 +150,11 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
     fn prefetch(&self, payload: u32) {
         self.object.prefetch_leaf(payload);
     }
+
+    #[inline(always)]
+    fn address(&self, payload: u32) -> *const u8 {
+        self.object.blocks.as_ptr().wrapping_add(leaf_blocks(payload).0 as usize) as *const u8
+    }
 }
 
 /// The leaf test of an any-hit query in one object (made as [`ClosestInObject`]).
@@ -175,6 +180,11 @@ impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
     #[inline(always)]
     fn prefetch(&self, payload: u32) {
         self.object.prefetch_leaf(payload);
+    }
+
+    #[inline(always)]
+    fn address(&self, payload: u32) -> *const u8 {
+        self.object.blocks.as_ptr().wrapping_add(leaf_blocks(payload).0 as usize) as *const u8
     }
 }
 
@@ -230,7 +240,7 @@ impl<N: NodeTest + TriTest> Leaf for AnyInstance<'_, N> {
 }
 
 /// Node, level, leaf and triangle counts of one object's BVH.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BvhShape {
     pub nodes: usize,
     /// Levels of 8-wide nodes.
@@ -239,6 +249,8 @@ pub struct BvhShape {
     /// Triangle blocks of the leaves (a leaf holds one or two).
     pub blocks: usize,
     pub triangles: usize,
+    /// [`wide::Bvh8::sah`]: expected node and block tests per ray through the root box.
+    pub sah: f64,
 }
 
 /// Per-object BVHs of a whole scene (built once per scene).
