@@ -660,16 +660,18 @@ fn scenes_with_runs(r: &mut Rng) -> Vec<SceneCase> {
     scenes
 }
 
-/// The intersection lists a receiver keeps (blockers tested run by run, runs whose box misses
-/// the fan's box or lies on one side of a fan plane passed over) equal those of every
-/// blocker tested one by one.
+/// The intersection lists a receiver keeps (blockers tested run by run, runs whose box, or
+/// the box of a group of runs holding it, misses the fan's box or lies on one side of a fan
+/// plane passed over) equal those of every blocker tested one by one; so do the lists made
+/// with the runs in curve order (which only long lists get in the full computation).
 #[test]
 fn intersection_lists_with_runs_passed_over_equal_every_blocker_tested() {
     let mut r = Rng::new(23);
     let (mut traces, mut tested, mut all, mut hidden) = (0, 0, 0, 0);
     for (g, lights, only, _) in scenes_with_runs(&mut r) {
         for (_, m) in receiver_meshes(&g, &lights, only.as_deref()) {
-            let runs = segments::Runs::new(&g, &m.blockers);
+            let runs = segments::Runs::for_traces(&g, &m.blockers, m.traces.len());
+            let curve = segments::Runs::new(&g, &m.blockers, true);
             for tv in &m.traces {
                 let fan = segments::fan_box(&m.receiver, &tv.trace);
                 let mut want = Vec::new();
@@ -678,6 +680,10 @@ fn intersection_lists_with_runs_passed_over_equal_every_blocker_tested() {
                 }
                 segments::sort_hidden(&mut want);
                 assert_eq!(tv.hidden, want, "receiver {} trace {:?}", m.receiver.tri, tv.trace.generator);
+                let mut by_curve = Vec::new();
+                curve.each_near(&m.receiver, &tv.trace, fan, |t| segments::hide_in_box(&g, &m.receiver, &tv.trace, fan, t, &mut by_curve));
+                segments::sort_hidden(&mut by_curve);
+                assert_eq!(by_curve, want, "curve order: receiver {} trace {:?}", m.receiver.tri, tv.trace.generator);
                 runs.each_near(&m.receiver, &tv.trace, fan, |_| tested += 1);
                 all += m.blockers.len();
                 hidden += want.len();

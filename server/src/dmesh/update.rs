@@ -203,7 +203,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // Static traces: re-intersected with the moved object only (its triangles in runs with
     // their boxes, after the object's box).
     let t0 = Instant::now();
-    let moved_runs = Runs::new(g, &new_moved);
+    let moved_runs = Runs::for_traces(g, &new_moved, m.traces.len());
     let near_new = pad(new_box, m.receiver.tol);
     let mut out: Vec<TraceVis> = Vec::with_capacity(m.traces.len());
     for tv in &m.traces {
@@ -235,7 +235,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // The blockers' runs only for traces to intersect (most receivers the object's shaft
     // reaches get none from it: building the runs reads every blocker).
     if !fresh.is_empty() {
-        let runs = Runs::new(g, &blockers);
+        let runs = Runs::for_traces(g, &blockers, fresh.len());
         out.extend(fresh.into_iter().map(|t| TraceVis::new(g, &receiver, t, &runs)));
     }
     super::segments::canonical_order(&mut out);
