@@ -7,6 +7,7 @@
 //! every triangle that can hide the light from any point of the face).
 use super::geometry::Geometry;
 use super::receiver::Receiver;
+use super::segments::{Runs, Step};
 use super::solid;
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use glam::{DVec2, DVec3};
@@ -41,6 +42,30 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
             break;
         }
     }
+    Some(vis)
+}
+
+/// [`visible_at`] with the blockers in runs ([`Runs`]): a run, or a group of runs, whose box
+/// misses the pyramid's box or lies wholly outside a side or an end of the pyramid is passed
+/// over whole — each of its triangles would be ([`Visible::passes_over_box`]). The triangles
+/// occlude in the runs' order: with the runs in list order the result is [`visible_at`]'s
+/// bit for bit; in curve order (long lists) it is the same visible part occluded in another
+/// order (equal up to rounding). Under the grid over the dragon a receiver's 18,799 faces
+/// each tested ~10⁵ blockers one by one.
+pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &Runs, q: DVec2, hit: &mut Vec<u32>) -> Option<Visible<'a>> {
+    hit.clear();
+    let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
+    let (lo, hi) = pyramid_box(&vis);
+    runs.walk(|step| match step {
+        Step::Open(b) => !(b.1.cmplt(lo).any() || b.0.cmpgt(hi).any() || vis.passes_over_box(*b)),
+        Step::Triangle(t) => {
+            let tri = g.tri(t);
+            if !passed_over(g, &vis, (lo, hi), t, &tri) && vis.occlude(tri) {
+                hit.push(t);
+            }
+            !vis.is_empty()
+        }
+    });
     Some(vis)
 }
 
@@ -81,9 +106,10 @@ pub fn none_can_hide(g: &Geometry, light: &LightPlane, r: &Receiver, tris: &[u32
 }
 
 impl FaceBackprojection {
-    pub fn compute(g: &Geometry, light: &LightPlane, r: &Receiver, blockers: &[u32], point: DVec2) -> FaceBackprojection {
+    /// The backprojection at `point`, the receiver's blockers in `runs`.
+    pub fn compute(g: &Geometry, light: &LightPlane, r: &Receiver, runs: &Runs, point: DVec2) -> FaceBackprojection {
         let mut occluders = Vec::new();
-        match visible_at(g, light, r, blockers, point, &mut occluders) {
+        match visible_in(g, light, r, runs, point, &mut occluders) {
             Some(vis) => FaceBackprojection { point, pieces: vis.pieces(), occluders, irradiance: vis.irradiance() },
             None => FaceBackprojection { point, ..Default::default() },
         }

@@ -141,10 +141,15 @@ pub fn face_backprojections(
     arrangement: &Arrangement,
     reuse: &mut impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
 ) -> Vec<FaceBackprojection> {
+    // The blockers' runs once for the faces to compute (none when every face is kept).
+    let mut runs = None;
     (0..arrangement.faces.len())
         .map(|f| {
             let point = arrangement.interior_point(f);
-            reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| FaceBackprojection::compute(g, light, receiver, blockers, point))
+            reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| {
+                let runs = runs.get_or_insert_with(|| segments::Runs::for_traces(g, blockers, arrangement.faces.len()));
+                FaceBackprojection::compute(g, light, receiver, runs, point)
+            })
         })
         .collect()
 }

@@ -537,40 +537,49 @@ impl Runs {
             };
             !planes.iter().all(aside)
         };
-        let top = self.levels.len() - 1;
-        if top == 0 {
-            self.runs(0..self.levels[0].len(), &near, &mut f);
-        } else {
-            for i in 0..self.levels[top].len() {
-                self.group(top, i, &near, &mut f);
+        self.walk(|step| match step {
+            Step::Open(b) => near(b),
+            Step::Triangle(t) => {
+                f(t);
+                true
             }
-        }
+        });
     }
 
-    /// The triangles of the runs in `range` that are `near`.
-    #[inline(always)]
-    fn runs(&self, range: std::ops::Range<usize>, near: &impl Fn(&(DVec3, DVec3)) -> bool, f: &mut impl FnMut(u32)) {
-        for i in range {
-            if near(&self.levels[0][i]) {
-                self.tris[i * RUN..((i + 1) * RUN).min(self.tris.len())].iter().for_each(|t| f(*t));
-            }
-        }
-    }
-
-    /// Box `i` of `level` (1 or more) and what it holds, if `near` it.
-    fn group(&self, level: usize, i: usize, near: &impl Fn(&(DVec3, DVec3)) -> bool, f: &mut impl FnMut(u32)) {
-        if !near(&self.levels[level][i]) {
+    /// Walks the boxes and triangles depth first, in the runs' order: `f(Step::Open(box))`
+    /// says whether to look inside a box (a group's or a run's), `f(Step::Triangle(t))`
+    /// whether to go on (`false` ends the walk). With every box opened the triangles come in
+    /// the runs' order, so a walk that opens fewer boxes and only skips triangles its test
+    /// would have skipped one by one does what the flat loop does.
+    pub fn walk(&self, mut f: impl FnMut(Step) -> bool) {
+        if self.tris.is_empty() {
             return;
         }
-        let below = i * FANOUT..((i + 1) * FANOUT).min(self.levels[level - 1].len());
-        if level == 1 {
-            self.runs(below, near, f);
-        } else {
-            for j in below {
-                self.group(level - 1, j, near, f);
+        let top = self.levels.len() - 1;
+        for i in 0..self.levels[top].len() {
+            if !self.group(top, i, &mut f) {
+                return;
             }
         }
     }
+
+    /// Box `i` of `level` and what it holds, if `f` opens it; `false` when the walk ends.
+    fn group(&self, level: usize, i: usize, f: &mut impl FnMut(Step) -> bool) -> bool {
+        if !f(Step::Open(&self.levels[level][i])) {
+            return true;
+        }
+        if level == 0 {
+            return self.tris[i * RUN..((i + 1) * RUN).min(self.tris.len())].iter().all(|t| f(Step::Triangle(*t)));
+        }
+        (i * FANOUT..((i + 1) * FANOUT).min(self.levels[level - 1].len())).all(|j| self.group(level - 1, j, f))
+    }
+}
+
+/// One step of [`Runs::walk`].
+pub enum Step<'a> {
+    /// A box of a group of runs or of one run, to open or pass over.
+    Open(&'a (DVec3, DVec3)),
+    Triangle(u32),
 }
 
 /// The unit normals of the planes of a trace's fan regions, as [`hidden_in_fan`] computes
