@@ -520,22 +520,23 @@ impl Runs {
         if self.tris.is_empty() {
             return;
         }
-        let planes = fan_planes(r, trace);
+        let regions = fan_regions(r, trace);
         let c = trace.apex;
         let near = |b: &(DVec3, DVec3)| {
             if b.0.cmpgt(hi + r.tol).any() || b.1.cmplt(lo - r.tol).any() {
                 return false;
             }
-            // The box's extreme heights over each plane; half the tolerance to spare for the
-            // rounding of the corners' heights against those of the triangles inside.
             let (mid, ext) = ((b.0 + b.1) * 0.5, (b.1 - b.0) * 0.5);
-            let aside = |m: &Option<DVec3>| {
-                m.is_none_or(|m| {
-                    let (d, e) = (m.dot(mid - c), m.abs().dot(ext));
-                    d - e > -0.5 * r.tol || d + e < 0.5 * r.tol
-                })
-            };
-            !planes.iter().all(aside)
+            // Near a region when the box reaches across its plane (its extreme heights over
+            // it; half the tolerance to spare for the rounding of the corners' heights
+            // against those of the triangles inside) and reaches inside each of its sides by
+            // more than the tolerance: a triangle whose crossing of the plane stays outside
+            // a side, or within the tolerance of it, hides nothing there (`hidden_in_fan`).
+            regions.iter().flatten().any(|g| {
+                let (d, e) = (g.m.dot(mid - c), g.m.abs().dot(ext));
+                let across = d - e <= -0.5 * r.tol && d + e >= 0.5 * r.tol;
+                across && g.sides[..g.k].iter().all(|(a, n)| n.dot(mid - *a) + n.abs().dot(ext) >= -r.tol)
+            })
         };
         self.walk(|step| match step {
             Step::Open(b) => near(b),
@@ -582,18 +583,41 @@ pub enum Step<'a> {
     Triangle(u32),
 }
 
-/// The unit normals of the planes of a trace's fan regions, as [`hidden_in_fan`] computes
-/// them from the regions [`hide_in_box`] passes (`None` for a degenerate region, which hides
-/// nothing).
-fn fan_planes(r: &Receiver, trace: &Trace) -> [Option<DVec3>; 2] {
+/// A region of a trace's fan ([`hide_in_box`]'s): the unit normal of its plane, as
+/// [`hidden_in_fan`] computes it, and per side a point and the unit normal pointing inward.
+struct FanRegion {
+    m: DVec3,
+    sides: [(DVec3, DVec3); 4],
+    k: usize,
+}
+
+impl FanRegion {
+    /// `None` for a degenerate region, which hides nothing.
+    fn new(region: &[DVec3]) -> Option<FanRegion> {
+        let m = (region[1] - region[0]).cross(region[2] - region[0]).try_normalize()?;
+        let k = region.len();
+        let inner = region.iter().sum::<DVec3>() / k as f64;
+        let mut sides = [(DVec3::ZERO, DVec3::ZERO); 4];
+        for i in 0..k {
+            let (a, b) = (region[i], region[(i + 1) % k]);
+            // ((b − a) × (x − a)) · m = (m × (b − a)) · (x − a): the side function there.
+            let n = m.cross(b - a).normalize_or_zero();
+            sides[i] = (a, if n.dot(inner - a) < 0.0 { -n } else { n });
+        }
+        Some(FanRegion { m, sides, k })
+    }
+}
+
+/// The regions of a trace's fan, as [`hide_in_box`] passes them to [`hidden_in_fan`].
+fn fan_regions(r: &Receiver, trace: &Trace) -> [Option<FanRegion>; 2] {
     let (p0, p1) = (r.to3(trace.a), r.to3(trace.b));
     let c = trace.apex;
     match trace.light_side {
         None => {
-            let a = c + (p0 - c) * LIGHT_GAP;
-            [(p0 - a).cross(p1 - a).try_normalize(), None]
+            let (a, b) = (c + (p0 - c) * LIGHT_GAP, c + (p1 - c) * LIGHT_GAP);
+            [FanRegion::new(&[a, p0, p1, b]), None]
         }
-        Some((y0, y1)) => [(p0 - c).cross(p1 - c).try_normalize(), (y0 - c).cross(y1 - c).try_normalize()],
+        Some((y0, y1)) => [FanRegion::new(&[c, p0, p1]), FanRegion::new(&[c, y0, y1])],
     }
 }
 
