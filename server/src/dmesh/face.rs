@@ -48,10 +48,9 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
 /// [`visible_at`] with the blockers in runs ([`Runs`]): a run, or a group of runs, whose box
 /// misses the pyramid's box or lies wholly outside a side or an end of the pyramid is passed
 /// over whole — each of its triangles would be ([`Visible::passes_over_box`]). The triangles
-/// occlude in the runs' order: with the runs in list order the result is [`visible_at`]'s
-/// bit for bit; in curve order (long lists) it is the same visible part occluded in another
-/// order (equal up to rounding). Under the grid over the dragon a receiver's 18,799 faces
-/// each tested ~10⁵ blockers one by one.
+/// occlude in the runs' order: with the runs in list order (as the mesh's faces use them) the
+/// result is [`visible_at`]'s bit for bit. Under the grid over the dragon a receiver's 18,799
+/// faces each tested ~10⁵ blockers one by one.
 pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &Runs, q: DVec2, hit: &mut Vec<u32>) -> Option<Visible<'a>> {
     hit.clear();
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;

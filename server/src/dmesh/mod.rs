@@ -141,13 +141,18 @@ pub fn face_backprojections(
     arrangement: &Arrangement,
     reuse: &mut impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
 ) -> Vec<FaceBackprojection> {
-    // The blockers' runs once for the faces to compute (none when every face is kept).
+    // The blockers' runs once for the faces to compute (none when every face is kept), in
+    // list order: the visible part is occluded triangle by triangle, and slivers below the
+    // clipping's area threshold come out differently in another order. A face the update
+    // keeps was occluded in the old list's order; the full computation's must be the same
+    // up to the moved triangles, which the curve order of a long list is not (its keys
+    // follow the list's box): on `chains` one receiver a move then differed in a sliver.
     let mut runs = None;
     (0..arrangement.faces.len())
         .map(|f| {
             let point = arrangement.interior_point(f);
             reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| {
-                let runs = runs.get_or_insert_with(|| segments::Runs::for_traces(g, blockers, arrangement.faces.len()));
+                let runs = runs.get_or_insert_with(|| segments::Runs::new(g, blockers, false));
                 FaceBackprojection::compute(g, light, receiver, runs, point)
             })
         })
