@@ -56,7 +56,14 @@ pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
     let (lo, hi) = pyramid_box(&vis);
     runs.walk(|step| match step {
-        Step::Open(b) => !(b.1.cmplt(lo).any() || b.0.cmpgt(hi).any() || vis.passes_over_box(*b)),
+        // The box grown by far more than the rounding of a corner's height over a side or
+        // an end against its triangles' own (`passes_over` on a triangle that touches a
+        // side within rounding may clip a sliver): a box passed over holds only triangles
+        // the flat loop passes over.
+        Step::Open(b) => {
+            let pad = 1e-12 * (b.0.abs().max(b.1.abs()).max_element() + 1.0);
+            !(b.1.cmplt(lo).any() || b.0.cmpgt(hi).any() || vis.passes_over_box((b.0 - pad, b.1 + pad)))
+        }
         Step::Triangle(t) => {
             let tri = g.tri(t);
             if !passed_over(g, &vis, (lo, hi), t, &tri) && vis.occlude(tri) {

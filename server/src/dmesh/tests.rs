@@ -660,6 +660,35 @@ fn scenes_with_runs(r: &mut Rng) -> Vec<SceneCase> {
     scenes
 }
 
+/// A face's backprojection walks the blockers' runs, passing over whole runs and groups
+/// whose box misses the point's pyramid: it equals the flat loop over every blocker
+/// ([`face::visible_at`]) bit for bit — the visible part, its irradiance and the occluders —
+/// on every face of the receivers near the ball on `rooms` and of random scenes (not in
+/// umbra).
+#[test]
+fn face_backprojections_through_runs_equal_the_flat_loop() {
+    let mut r = Rng::new(29);
+    let (mut faces, mut occluded) = (0, 0);
+    for (g, lights, only, _) in scenes_with_runs(&mut r) {
+        // (A receiver in umbra behind one occluder names that occluder, not what the loop
+        // finds first.)
+        for (l, m) in receiver_meshes(&g, &lights, only.as_deref()).into_iter().filter(|(_, m)| !m.umbra) {
+            let mut hit = Vec::new();
+            for f in &m.faces {
+                let flat = face::visible_at(&g, &lights[l], &m.receiver, &m.blockers, f.point, &mut hit);
+                assert_eq!(flat.as_ref().map(|v| v.irradiance().to_bits()), Some(f.irradiance.to_bits()).filter(|_| flat.is_some()), "receiver {}", m.receiver.tri);
+                if flat.is_some() {
+                    assert_eq!(hit, f.occluders, "receiver {}", m.receiver.tri);
+                    assert_eq!(flat.map(|v| v.pieces()), Some(f.pieces.clone()));
+                }
+                occluded += !f.occluders.is_empty() as usize;
+                faces += 1;
+            }
+        }
+    }
+    assert!(faces > 1000 && occluded > 100, "{faces} faces, {occluded} occluded");
+}
+
 /// The intersection lists a receiver keeps (blockers tested run by run, runs whose box, or
 /// the box of a group of runs holding it, misses the fan's box or lies on one side of a fan
 /// plane passed over) equal those of every blocker tested one by one; so do the lists made
