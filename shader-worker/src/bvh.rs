@@ -100,6 +100,12 @@ impl ObjectBvh {
         leaf.hit
     }
 
+    /// Where leaf `payload`'s first block starts (for a prefetch; not dereferenced).
+    #[inline(always)]
+    fn leaf_address(&self, payload: u32) -> *const u8 {
+        self.blocks.as_ptr().wrapping_add(leaf_blocks(payload).0 as usize) as *const u8
+    }
+
     /// Starts loading the blocks of leaf `payload` (a hint).
     #[inline(always)]
     fn prefetch_leaf(&self, payload: u32) {
@@ -153,7 +159,7 @@ impl<N: NodeTest + TriTest> Leaf for ClosestInObject<'_, N> {
 
     #[inline(always)]
     fn address(&self, payload: u32) -> *const u8 {
-        self.object.blocks.as_ptr().wrapping_add(leaf_blocks(payload).0 as usize) as *const u8
+        self.object.leaf_address(payload)
     }
 }
 
@@ -184,7 +190,7 @@ impl<N: NodeTest + TriTest> Leaf for AnyInObject<'_, N> {
 
     #[inline(always)]
     fn address(&self, payload: u32) -> *const u8 {
-        self.object.blocks.as_ptr().wrapping_add(leaf_blocks(payload).0 as usize) as *const u8
+        self.object.leaf_address(payload)
     }
 }
 

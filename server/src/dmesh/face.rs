@@ -5,7 +5,7 @@
 //! moves continuously; at any point of the face the irradiance is Lambert's formula over
 //! the visible part from that point, occluded by the receiver's shaft blockers (which hold
 //! every triangle that can hide the light from any point of the face).
-use super::geometry::Geometry;
+use super::geometry::{boxes_meet, Geometry};
 use super::receiver::Receiver;
 use super::segments::{Runs, Step};
 use super::solid;
@@ -31,18 +31,22 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
     let pyramid = pyramid_box(&vis);
     for &t in blockers {
-        let tri = g.tri(t);
-        if passed_over(g, &vis, pyramid, t, &tri) {
-            continue;
-        }
-        if vis.occlude(tri) {
-            hit.push(t);
-        }
-        if vis.is_empty() {
+        if !occlude_by(g, &mut vis, pyramid, t, hit) {
             break;
         }
     }
     Some(vis)
+}
+
+/// One blocker's step of [`visible_at`] and [`visible_in`]: `t` clips the visible part
+/// unless it is passed over, and is noted in `hit` if it hid something. Whether some of
+/// the light is still visible (else the loop ends).
+fn occlude_by(g: &Geometry, vis: &mut Visible, pyramid: (DVec3, DVec3), t: u32, hit: &mut Vec<u32>) -> bool {
+    let tri = g.tri(t);
+    if !passed_over(g, vis, pyramid, t, &tri) && vis.occlude(tri) {
+        hit.push(t);
+    }
+    !vis.is_empty()
 }
 
 /// [`visible_at`] with the blockers in runs ([`Runs`]): a run, or a group of runs, whose box
@@ -54,7 +58,7 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
 pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &Runs, q: DVec2, hit: &mut Vec<u32>) -> Option<Visible<'a>> {
     hit.clear();
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
-    let (lo, hi) = pyramid_box(&vis);
+    let pyramid = pyramid_box(&vis);
     runs.walk(|step| match step {
         // The box grown by far more than the rounding of a corner's height over a side or
         // an end against its triangles' own (`passes_over` on a triangle that touches a
@@ -62,15 +66,9 @@ pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &
         // the flat loop passes over.
         Step::Open(b) => {
             let pad = 1e-12 * (b.0.abs().max(b.1.abs()).max_element() + 1.0);
-            !(b.1.cmplt(lo).any() || b.0.cmpgt(hi).any() || vis.passes_over_box((b.0 - pad, b.1 + pad)))
+            boxes_meet(*b, pyramid) && !vis.passes_over_box((b.0 - pad, b.1 + pad))
         }
-        Step::Triangle(t) => {
-            let tri = g.tri(t);
-            if !passed_over(g, &vis, (lo, hi), t, &tri) && vis.occlude(tri) {
-                hit.push(t);
-            }
-            !vis.is_empty()
-        }
+        Step::Triangle(t) => occlude_by(g, &mut vis, pyramid, t, hit),
     });
     Some(vis)
 }

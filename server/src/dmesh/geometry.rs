@@ -140,6 +140,11 @@ impl Geometry {
         bounds_of(self.object_vertices(o).map(|v| self.pos[v as usize]))
     }
 
+    /// Axis-aligned bounds of triangle `t`.
+    pub fn tri_bounds(&self, t: u32) -> (DVec3, DVec3) {
+        bounds_of(self.tri(t).into_iter())
+    }
+
     /// Axis-aligned bounds of the whole scene.
     pub fn bounds(&self) -> (DVec3, DVec3) {
         bounds_of(self.pos.iter().copied())
@@ -149,6 +154,16 @@ impl Geometry {
     pub fn bytes(&self) -> usize {
         self.pos.len() * 24 + self.tris.len() * 16 + self.edge_tris.len() * 48 + self.neighbours.iter().map(|n| 24 + n.len() * 4).sum::<usize>()
     }
+}
+
+/// Whether two axis-aligned boxes meet (touching counts).
+pub fn boxes_meet(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> bool {
+    !(a.0.cmpgt(b.1).any() || a.1.cmplt(b.0).any())
+}
+
+/// The box around some boxes (inverted, infinite for none).
+pub fn union_of(boxes: impl Iterator<Item = (DVec3, DVec3)>) -> (DVec3, DVec3) {
+    boxes.fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), b| (lo.min(b.0), hi.max(b.1)))
 }
 
 /// Axis-aligned bounds of some points (inverted, infinite ones for none).

@@ -15,7 +15,7 @@
 //! generating line, from the receiver through the blocker to the light, meets no other
 //! triangle. The occluders of one surface are found in its fan triangle(s) and projected
 //! from the fan's apex onto the trace, which is an interval computation.
-use super::geometry::{edge_key, EdgeKey, Geometry};
+use super::geometry::{edge_key, union_of, EdgeKey, Geometry};
 use super::receiver::{LightAbove, Receiver};
 use edgepoint_scene::backprojection::{LightPlane, LIGHT_GAP};
 use glam::{DVec2, DVec3};
@@ -463,10 +463,6 @@ fn spread(v: u32) -> u64 {
     (x | x << 2) & 0x0924_9249
 }
 
-fn union(boxes: &[(DVec3, DVec3)]) -> (DVec3, DVec3) {
-    boxes.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), b| (lo.min(b.0), hi.max(b.1)))
-}
-
 impl Runs {
     /// The runs of `tris` for `traces` fans: in curve order when the list is long
     /// ([`CURVE_ORDER_FROM`]) and the fans many ([`CURVE_ORDER_TRACES`]), else in list order.
@@ -476,19 +472,12 @@ impl Runs {
 
     /// The runs of `tris`, in curve order if `curve`.
     pub fn new(g: &Geometry, tris: &[u32], curve: bool) -> Runs {
-        let tri_box = |t: u32| {
-            let p = g.tri(t);
-            (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
-        };
         let (tris, runs) = if !curve {
-            let runs = tris.chunks(RUN).map(|c| c.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| {
-                let b = tri_box(*t);
-                (lo.min(b.0), hi.max(b.1))
-            }));
+            let runs = tris.chunks(RUN).map(|c| union_of(c.iter().map(|t| g.tri_bounds(*t))));
             (tris.to_vec(), runs.collect::<Vec<_>>())
         } else {
-            let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|t| tri_box(*t)).collect();
-            let (lo, hi) = union(&boxes);
+            let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|t| g.tri_bounds(*t)).collect();
+            let (lo, hi) = union_of(boxes.iter().copied());
             let scale = 1023.0 / (hi - lo).max(DVec3::splat(1e-300));
             let mut keyed: Vec<(u64, u32, u32)> = boxes
                 .iter()
@@ -500,11 +489,11 @@ impl Runs {
                 .collect();
             keyed.sort_unstable();
             let ordered: Vec<(DVec3, DVec3)> = keyed.iter().map(|k| boxes[k.2 as usize]).collect();
-            (keyed.iter().map(|k| k.1).collect(), ordered.chunks(RUN).map(union).collect())
+            (keyed.iter().map(|k| k.1).collect(), ordered.chunks(RUN).map(|c| union_of(c.iter().copied())).collect())
         };
         let mut levels = vec![runs];
         while levels.last().is_some_and(|l| l.len() > FANOUT) {
-            let up = levels.last().expect("a level").chunks(FANOUT).map(union).collect();
+            let up = levels.last().expect("a level").chunks(FANOUT).map(|c| union_of(c.iter().copied())).collect();
             levels.push(up);
         }
         Runs { tris, levels }

@@ -20,7 +20,7 @@
 //!
 //! The result equals a full recomputation (tested on random moves; the benchmark counts
 //! mismatches).
-use super::geometry::Geometry;
+use super::geometry::{boxes_meet, Geometry};
 use super::grid::Grid;
 use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
@@ -91,16 +91,8 @@ fn ns(t: Instant) -> u64 {
     t.elapsed().as_nanos() as u64
 }
 
-fn object_box(g: &Geometry, o: u32) -> (DVec3, DVec3) {
-    g.object_vertices(o).fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), v| (lo.min(g.pos[v as usize]), hi.max(g.pos[v as usize])))
-}
-
 fn pad(b: (DVec3, DVec3), by: f64) -> (DVec3, DVec3) {
     (b.0 - by, b.1 + by)
-}
-
-fn overlap(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> bool {
-    !(a.0.cmpgt(b.1).any() || a.1.cmplt(b.0).any())
 }
 
 impl DiscontinuityMesh {
@@ -111,7 +103,7 @@ impl DiscontinuityMesh {
         grid.remove(old, moved.clone());
         grid.insert(new, moved.clone());
         let grid: &Grid = grid;
-        let (b0, b1) = (object_box(old, o), object_box(new, o));
+        let (b0, b1) = (old.object_bounds(o), new.object_bounds(o));
         let motion = (b0.0.min(b1.0) - self.tol, b0.1.max(b1.1) + self.tol);
         let tol = self.tol;
         let only = self.only.as_deref();
@@ -140,7 +132,7 @@ impl DiscontinuityMesh {
                         *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
                         s.receivers_recomputed = 1;
                         s.own_receivers_ns = ns(t0);
-                    } else if let Some(m) = slot.as_mut().filter(|m| overlap((m.shaft.lo, m.shaft.hi), motion)) {
+                    } else if let Some(m) = slot.as_mut().filter(|m| boxes_meet((m.shaft.lo, m.shaft.hi), motion)) {
                         s.receivers_in_motion_volume = 1;
                         if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
                             **m = u;
@@ -213,13 +205,13 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         // A surface that does not cross the motion volume (paper 002 §4.1) meets the moved
         // object neither before nor after: its intersection list stays as it is.
         let fan = fan_box(&receiver, &tv.trace);
-        if !overlap(fan, motion) {
+        if !boxes_meet(fan, motion) {
             out.push(tv.clone());
             s.traces_untouched += 1;
             continue;
         }
         let mut hidden: Vec<(u32, f64, f64)> = tv.hidden.iter().copied().filter(|h| !moved.contains(&h.0)).collect();
-        if overlap(fan, near_new) {
+        if boxes_meet(fan, near_new) {
             moved_runs.each_near(&receiver, &tv.trace, fan, |t| hide_in_box(g, &receiver, &tv.trace, fan, t, &mut hidden));
         }
         sort_hidden(&mut hidden);
@@ -284,7 +276,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
             }
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
-            (!overlap((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| f.clone())
+            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| f.clone())
         });
         if reuse.is_some() {
             kept += 1;

@@ -242,17 +242,17 @@ mod tests {
         assert!(met > 5000, "too few boxes met to test anything: {met} of {checked}");
     }
 
+    /// The centre of child `c`'s box on axis `a`.
+    #[cfg(target_arch = "x86_64")]
+    fn centre(node: &Node8, a: usize, c: usize) -> f32 {
+        (node.planes[2 * a][c] + node.planes[2 * a + 1][c]) * 0.5
+    }
+
     /// The AVX2 test's integer maxima, minima and comparison give the float test's answer:
     /// the same mask and, for every child hit, the same entry distance bit for bit, against
     /// the same fused arithmetic with float `max`, `min` and `<=` — on boxes in front of
     /// the origin, behind it and around it, empty children (±∞ planes), tiny and infinite
     /// `tmax`, and `tmin` of 0 and above.
-    /// The centre of child `c`'s box on axis `a`.
-    #[cfg(target_arch = "x86_64")]
-    fn p0(node: &Node8, a: usize, c: usize) -> f32 {
-        (node.planes[2 * a][c] + node.planes[2 * a + 1][c]) * 0.5
-    }
-
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_integer_order_equals_float_order() {
@@ -279,7 +279,7 @@ mod tests {
             let o = Vec3A::new(f(), f(), f()) * 3.0;
             // Half the rays aimed at a child's centre (hits), half anywhere.
             let k = n % children;
-            let centre = Vec3A::new(p0(&node, 0, k), p0(&node, 1, k), p0(&node, 2, k));
+            let centre = Vec3A::new(centre(&node, 0, k), centre(&node, 1, k), centre(&node, 2, k));
             let aim = if n % 2 == 0 { centre - o } else { Vec3A::ZERO };
             let d = (aim + Vec3A::new(f(), f(), f())) * if n % 9 == 0 { Vec3A::new(1.0, 0.0, 1.0) } else { Vec3A::ONE };
             let tmin = [0.0f32, 0.0, 1e-4, 0.5][n % 4];
