@@ -95,6 +95,8 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let receivers = mesh.receivers().count();
     let with_segments = mesh.receivers().filter(|m| !m.segments.is_empty()).count();
     let (segments, faces) = (mesh.segment_count(), mesh.face_count());
+    let eee_surfaces: usize = mesh.receivers().map(|m| m.eee.len()).sum();
+    let eee_segments: usize = mesh.receivers().map(|m| m.segments.iter().filter(|s| matches!(s.generator, edgepoint_server::dmesh::segments::Generator::Eee { .. })).count()).sum();
     let (mesh_bytes, grid_bytes, geometry_bytes) = (mesh.bytes(), grid.bytes(), g.bytes());
     let threads = rayon::current_num_threads();
     // The moved object.
@@ -111,7 +113,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
             })
             .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", a.scene))? as u32,
     };
-    let intersection_bytes: usize = mesh.receivers().map(|m| m.traces.iter().map(|t| t.bytes()).sum::<usize>()).sum();
+    let intersection_bytes: usize = mesh.receivers().map(|m| m.traces.iter().map(|t| t.bytes()).sum::<usize>() + m.eee.iter().map(|t| t.bytes()).sum::<usize>()).sum();
     let mut rng = Rng::new(a.seed);
     let mut g = g;
     let (mut incr_ms, mut full_after_ms, mut bad, mut moves) = (Vec::new(), Vec::new(), 0usize, Vec::new());
@@ -139,11 +141,11 @@ pub fn run(a: DmeshArgs) -> Result<()> {
             "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
             "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "receivers_kept_in_umbra": stats.receivers_kept_in_umbra, "arrangements_kept": stats.arrangements_kept, "traces_reintersected": stats.traces_reintersected,
             "traces_untouched": stats.traces_untouched,
-            "traces_recast": stats.traces_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
+            "traces_recast": stats.traces_recast, "eee_reintersected": stats.eee_reintersected, "eee_untouched": stats.eee_untouched, "eee_recast": stats.eee_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
             // CPU time of the update's parts, summed over threads.
             "cpu_ms": {
                 "own_receivers": stats.own_receivers_ns as f64 / 1e6, "scan": stats.scan_ns as f64 / 1e6,
-                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6,
+                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6, "eee": stats.eee_ns as f64 / 1e6,
                 "arrangement": stats.arrangement_ns as f64 / 1e6, "faces": stats.faces_ns as f64 / 1e6,
             },
         }));
@@ -151,7 +153,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let (si, sf) = (incr_ms.iter().sum::<f64>(), full_after_ms.iter().sum::<f64>());
     let speedup = if a.moves > 0 { Some(sf / si) } else { None };
     let table = format!(
-        "{}: {} triangles, {} area lights, {threads} threads\nfull computation {full_ms:.1} ms (grid {grid_ms:.1} ms)\nreceivers lit {receivers}, with segments {with_segments}\nsegments {segments}, faces {faces}\nmemory: mesh {:.2} MB (intersection lists {:.2} MB), grid {:.2} MB, geometry {:.2} MB\nmoved {} ({} moves): incremental {:.2} ms, full {:.1} ms per move, speedup {:.1}×, mismatches {bad}\n",
+        "{}: {} triangles, {} area lights, {threads} threads\nfull computation {full_ms:.1} ms (grid {grid_ms:.1} ms)\nreceivers lit {receivers}, with segments {with_segments}\nsegments {segments} (EEE polyline chords {eee_segments} from {eee_surfaces} EEE surface parts), faces {faces}\nmemory: mesh {:.2} MB (intersection lists {:.2} MB), grid {:.2} MB, geometry {:.2} MB\nmoved {} ({} moves): incremental {:.2} ms, full {:.1} ms per move, speedup {:.1}×, mismatches {bad}\n",
         a.scene,
         g.tris.len(),
         lights.len(),
@@ -175,6 +177,8 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         "receivers": receivers,
         "receivers_with_segments": with_segments,
         "segments": segments,
+        "eee_surfaces": eee_surfaces,
+        "eee_segments": eee_segments,
         "faces": faces,
         "mesh_bytes": mesh_bytes,
         "grid_bytes": grid_bytes,

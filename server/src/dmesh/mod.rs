@@ -14,6 +14,7 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 pub mod arrangement;
+pub mod eee;
 pub mod face;
 pub mod geometry;
 pub mod grid;
@@ -24,6 +25,7 @@ pub mod umbra;
 pub mod update;
 
 use arrangement::Arrangement;
+use eee::EeeSurface;
 use face::FaceBackprojection;
 use geometry::Geometry;
 use grid::Grid;
@@ -44,7 +46,10 @@ pub struct ReceiverMesh {
     pub blockers: Vec<u32>,
     /// The surfaces' traces with their intersection lists.
     pub traces: Vec<TraceVis>,
-    /// The visible segments (the traces after 1D visibility).
+    /// The EEE surfaces with one edge on the light, with their intersection lists.
+    pub eee: Vec<EeeSurface>,
+    /// The visible segments (the traces after 1D visibility, then the EEE surfaces' visible
+    /// polylines).
     pub segments: Vec<Segment>,
     pub arrangement: Arrangement,
     /// One per bounded face of the arrangement.
@@ -71,7 +76,8 @@ impl ReceiverMesh {
             return ReceiverMesh::in_umbra(receiver, shaft, blockers, occluder);
         }
         let traces = segments::receiver_traces(g, light, above, &receiver, &blockers);
-        ReceiverMesh::assemble(g, light, receiver, shaft, blockers, traces, |_, _| None)
+        let eee = eee::receiver_surfaces(g, light, above, &receiver, &blockers);
+        ReceiverMesh::assemble(g, light, receiver, shaft, blockers, traces, eee, |_, _| None)
     }
 
     /// A receiver hidden from the whole light by `occluder`: the triangle is one face that
@@ -79,7 +85,7 @@ impl ReceiverMesh {
     fn in_umbra(receiver: Receiver, shaft: Shaft, blockers: Vec<u32>, occluder: Vec<u32>) -> ReceiverMesh {
         let arrangement = arrangement::build(&receiver.corners, &[], receiver.tol);
         let faces = (0..arrangement.faces.len()).map(|f| FaceBackprojection { point: arrangement.interior_point(f), pieces: Vec::new(), occluders: occluder.clone(), irradiance: 0.0 }).collect();
-        ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), segments: Vec::new(), arrangement, faces, umbra: true }
+        ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), eee: Vec::new(), segments: Vec::new(), arrangement, faces, umbra: true }
     }
 
     /// The segments, arrangement and face backprojections from the traces; `reuse` may give
@@ -91,11 +97,12 @@ impl ReceiverMesh {
         shaft: Shaft,
         blockers: Vec<u32>,
         traces: Vec<TraceVis>,
+        eee: Vec<EeeSurface>,
         mut reuse: impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
     ) -> ReceiverMesh {
-        let (segments, arrangement) = arrange(&receiver, &traces);
+        let (segments, arrangement) = arrange(g, &receiver, &blockers, &traces, &eee);
         let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut reuse);
-        ReceiverMesh { receiver, shaft, blockers, traces, segments, arrangement, faces, umbra: false }
+        ReceiverMesh { receiver, shaft, blockers, traces, eee, segments, arrangement, faces, umbra: false }
     }
 
     /// Irradiance per unit radiance at receiver point `q` (receiver frame), from the
@@ -109,25 +116,32 @@ impl ReceiverMesh {
         std::mem::size_of::<ReceiverMesh>()
             + self.blockers.len() * 4
             + self.traces.iter().map(|t| t.bytes()).sum::<usize>()
+            + self.eee.iter().map(|t| t.bytes()).sum::<usize>()
             + self.segments.len() * std::mem::size_of::<Segment>()
             + self.arrangement.bytes()
             + self.faces.iter().map(|f| f.bytes()).sum::<usize>()
     }
 }
 
-/// 1D visibility on every trace and the arrangement of the visible segments.
-pub fn arrange(receiver: &Receiver, traces: &[TraceVis]) -> (Vec<Segment>, Arrangement) {
-    let segments = visible_segments(receiver, traces);
+/// 1D visibility on every trace and EEE surface, and the arrangement of the visible
+/// segments and the blockers' contacts.
+pub fn arrange(g: &Geometry, receiver: &Receiver, blockers: &[u32], traces: &[TraceVis], eee: &[EeeSurface]) -> (Vec<Segment>, Arrangement) {
+    let segments = visible_segments(g, receiver, blockers, traces, eee);
     let arrangement = arrangement::build(&receiver.corners, &segments, receiver.tol);
     (segments, arrangement)
 }
 
-/// The visible segments of `traces` (1D visibility), in the traces' order.
-pub fn visible_segments(receiver: &Receiver, traces: &[TraceVis]) -> Vec<Segment> {
+/// The visible segments of `traces` and of the `eee` surfaces (1D visibility), in their
+/// order, then the contacts of `blockers` with the receiver's plane.
+pub fn visible_segments(g: &Geometry, receiver: &Receiver, blockers: &[u32], traces: &[TraceVis], eee: &[EeeSurface]) -> Vec<Segment> {
     let mut segments = Vec::new();
     for t in traces {
         t.visible(receiver, &mut segments);
     }
+    for s in eee {
+        s.visible(g, receiver, &mut segments);
+    }
+    segments::contacts(g, receiver, blockers, &mut segments);
     segments
 }
 

@@ -26,6 +26,10 @@ use glam::{DVec2, DVec3};
 pub enum Generator {
     Ve { light_vertex: u32, edge: EdgeKey },
     Ev { light_edge: u32, vertex: u32 },
+    /// Light edge × two blocker edges, the smaller key first ([`super::eee`]).
+    Eee { light_edge: u32, edges: (EdgeKey, EdgeKey) },
+    /// Where blocker triangle `tri` passes through the receiver's plane ([`contacts`]).
+    Contact { tri: u32 },
 }
 
 impl Generator {
@@ -34,6 +38,10 @@ impl Generator {
         match *self {
             Generator::Ve { edge, .. } => edge.0 == v || edge.1 == v,
             Generator::Ev { vertex, .. } => vertex == v,
+            Generator::Eee { edges: (a, b), .. } => a.0 == v || a.1 == v || b.0 == v || b.1 == v,
+            // Contacts are made again from the blockers whenever the segments are (none is
+            // kept through a move), so they are never looked up by vertex.
+            Generator::Contact { .. } => false,
         }
     }
 }
@@ -311,6 +319,38 @@ pub fn traces_with(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Rec
     }
 }
 
+/// The segments where blockers pass through the receiver's plane, inside the receiver
+/// triangle (paper 002 §2's mesh holds the receiver's intersections with the other
+/// polygons): on one side the blocker stands above the receiver and may hide the light
+/// right up to the line, on the other it is below and hides nothing — a discontinuity that
+/// no surface of the light makes. `blockers` sorted; appended to `out` in their order.
+pub fn contacts(g: &Geometry, r: &Receiver, blockers: &[u32], out: &mut Vec<Segment>) {
+    for &t in blockers {
+        let tri = g.tri(t);
+        let h = tri.map(|p| r.height(p));
+        if !(h.iter().any(|x| *x > r.tol) && h.iter().any(|x| *x < -r.tol)) {
+            continue;
+        }
+        let mut q = [DVec2::ZERO; 2];
+        let mut n = 0;
+        for k in 0..3 {
+            let j = (k + 1) % 3;
+            if (h[k] > 0.0) != (h[j] > 0.0) && n < 2 {
+                q[n] = r.to2(tri[k] + (tri[j] - tri[k]) * (h[k] / (h[k] - h[j])));
+                n += 1;
+            }
+        }
+        if n < 2 {
+            continue;
+        }
+        let Some((s0, s1)) = r.clip_segment(q[0], q[1]) else { continue };
+        let (a, b) = (q[0].lerp(q[1], s0), q[0].lerp(q[1], s1));
+        if a.distance(b) > r.tol {
+            out.push(Segment { generator: Generator::Contact { tri: t }, a, b });
+        }
+    }
+}
+
 /// Whether triangle `t` is one of the generator's own (it touches the fan along the edge or
 /// at the vertex, which is no occlusion).
 fn is_own(g: &Geometry, gen: &Generator, t: u32) -> bool {
@@ -318,6 +358,8 @@ fn is_own(g: &Geometry, gen: &Generator, t: u32) -> bool {
     match *gen {
         Generator::Ve { edge, .. } => v.contains(&edge.0) && v.contains(&edge.1),
         Generator::Ev { vertex, .. } => v.contains(&vertex),
+        Generator::Eee { edges: (a, b), .. } => (v.contains(&a.0) && v.contains(&a.1)) || (v.contains(&b.0) && v.contains(&b.1)),
+        Generator::Contact { tri } => tri == t,
     }
 }
 

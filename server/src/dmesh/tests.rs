@@ -307,6 +307,128 @@ fn segments_equal_a_brute_force_enumeration() {
     assert!(yes > 300 && no > 300, "{yes} discontinuity points, {no} others");
 }
 
+/// Two long thin bars crossing above a floor at different heights under a square light:
+/// their shadows cross, so from each light edge's points the line through both bars' long
+/// edges reaches the floor (EEE surfaces that must be there); a plate below hides some of
+/// those lines.
+fn crossed_bars() -> (Geometry, LightPlane) {
+    let floor = (vec![DVec3::new(-2.0, 0.0, -2.0), DVec3::new(2.0, 0.0, -2.0), DVec3::new(2.0, 0.0, 2.0), DVec3::new(-2.0, 0.0, 2.0)], vec![[0, 1, 2], [0, 2, 3]]);
+    let bar = |a: DVec3, b: DVec3, w: DVec3| (vec![a - w, b - w, b + w, a + w], vec![[0, 1, 2], [0, 2, 3]]);
+    let objects = vec![
+        floor,
+        bar(DVec3::new(-1.5, 1.0, 0.1), DVec3::new(1.5, 1.1, -0.1), DVec3::new(0.0, 0.02, 0.15)),
+        bar(DVec3::new(0.2, 1.6, -1.5), DVec3::new(-0.1, 1.5, 1.5), DVec3::new(0.12, 0.0, 0.0)),
+        // A plate below them that hides some of the lines.
+        bar(DVec3::new(-0.3, 0.5, 0.1), DVec3::new(0.2, 0.55, 0.1), DVec3::new(0.0, 0.0, 0.25)),
+    ];
+    let light: Vec<Vec3> = [(-0.5, -0.4), (0.5, -0.5), (0.45, 0.5), (-0.5, 0.45)].iter().map(|(x, z)| Vec3::new(*x, 2.5, *z)).collect();
+    (Geometry::from_objects(&objects), LightPlane::new(&light).unwrap())
+}
+
+/// Whether the open segment from `p` to the light point `y` (short of it by `LIGHT_GAP`)
+/// crosses the interior of a triangle other than the receiver and those at edges `e1`, `e2`
+/// (which the EEE line only grazes).
+fn eee_blocked(g: &Geometry, skip: u32, (e1, e2): (EdgeKey, EdgeKey), p: DVec3, y: DVec3) -> bool {
+    let at = |v: &[u32; 3], e: EdgeKey| v.contains(&e.0) && v.contains(&e.1);
+    (0..g.tris.len() as u32).filter(|t| *t != skip && !at(&g.tris[*t as usize], e1) && !at(&g.tris[*t as usize], e2)).any(|t| {
+        let tri = g.tri(t);
+        eee::pierces(p, p + (y - p) * (1.0 - LIGHT_GAP), &tri)
+    })
+}
+
+/// Every light-edge × blocker-edge × blocker-edge triple, brute force: at 401 points of the
+/// light edge the line through the point and both blocker edges is found from the planes
+/// through the point and each edge (the point of one edge in the other's plane), and judged
+/// by direct tests — it meets both segments below the light and above the receiver, in
+/// front of the light, ends in the receiver, both edges are silhouettes from the point, and
+/// no other triangle crosses it. The mesh's EEE surfaces say the same at every point not
+/// within 10⁻⁶ of one of their ends, a visible point lies on their polyline (within the
+/// chords' tolerance), and across a visible point away from other segments the light
+/// edge's hidden parts end at other blocker edges on either side: it is a discontinuity.
+#[test]
+fn eee_surfaces_equal_a_brute_force_enumeration() {
+    let mut r = Rng::new(17);
+    let mut scenes: Vec<(Geometry, LightPlane)> = (0..12).map(|_| random_scene(&mut r)).collect();
+    scenes.push(crossed_bars());
+    let (mut visible, mut hidden, mut discontinuities, mut bars) = (0, 0, 0, 0);
+    for (si, (g, light)) in scenes.iter().enumerate() {
+        let edges: BTreeSet<EdgeKey> = g.tris.iter().flat_map(|t| (0..3).map(move |k| edge_key(t[k], t[(k + 1) % 3]))).collect();
+        for tri in 0..2 {
+            let Some(m) = mesh_of(g, light, tri) else { continue };
+            let rc = &m.receiver;
+            let above = receiver::LightAbove::new(light, rc).unwrap();
+            let chord = eee::CHORD_TOLERANCE * 4.0 * 2f64.sqrt() + 1e-7;
+            for (li, e) in above.edges.iter().enumerate() {
+                let Some((y0, y1)) = *e else { continue };
+                for &e1 in &edges {
+                    for &e2 in edges.range(e1..).skip(1) {
+                        if [e1.0, e1.1].iter().any(|v| *v == e2.0 || *v == e2.1) {
+                            continue;
+                        }
+                        let gen = Generator::Eee { light_edge: li as u32, edges: (e1, e2) };
+                        let mine: Vec<&eee::EeeSurface> = m.eee.iter().filter(|s| s.generator == gen).collect();
+                        let ends: Vec<f64> = mine.iter().flat_map(|s| [s.part.0, s.part.1].into_iter().chain(s.hidden.iter().flat_map(|h| [h.1, h.2]))).collect();
+                        let claims = |s: f64| mine.iter().any(|m| s > m.part.0 && s < m.part.1 && !m.hidden.iter().any(|h| s > h.1 && s < h.2));
+                        let (a1, b1, a2, b2) = (g.pos[e1.0 as usize], g.pos[e1.1 as usize], g.pos[e2.0 as usize], g.pos[e2.1 as usize]);
+                        let mut points: Vec<DVec2> = Vec::new();
+                        for i in 0..=400 {
+                            let s = i as f64 / 400.0;
+                            let y = y0 + (y1 - y0) * s;
+                            let (n1, n2) = ((a1 - y).cross(b1 - y), (a2 - y).cross(b2 - y));
+                            let u1 = n2.dot(y - a1) / n2.dot(b1 - a1);
+                            let u2 = n1.dot(y - a2) / n1.dot(b2 - a2);
+                            let (x1, x2) = (a1 + (b1 - a1) * u1, a2 + (b2 - a2) * u2);
+                            let hy = rc.height(y);
+                            let ok_x = |x: DVec3, u: f64| u > 0.0 && u < 1.0 && rc.height(x) > rc.tol && rc.height(x) < hy && light.height(x) > 0.0;
+                            let mut exists = ok_x(x1, u1) && ok_x(x2, u2) && x1.distance(x2) > 1e-9;
+                            let mut end = DVec3::ZERO;
+                            if exists {
+                                // From y through the lower of the two points to the floor.
+                                let x = if rc.height(x1) < rc.height(x2) { x1 } else { x2 };
+                                end = y + (x - y) * (hy / (hy - rc.height(x)));
+                                exists = rc.contains(rc.to2(end)) && segments::is_silhouette(g, y, e1, rc.tol) && segments::is_silhouette(g, y, e2, rc.tol);
+                            }
+                            let brute = exists && !eee_blocked(g, tri, (e1, e2), end, y);
+                            if brute {
+                                points.push(rc.to2(end));
+                            }
+                            if ends.iter().any(|x| (x - s).abs() < 1e-6) {
+                                continue;
+                            }
+                            assert_eq!(brute, claims(s), "scene {si} receiver {tri} {gen:?} at s = {s}: brute force {brute}");
+                            if brute {
+                                visible += 1;
+                                bars += (si == scenes.len() - 1) as usize;
+                                let q = rc.to2(end);
+                                let near = m.segments.iter().filter(|x| x.generator == gen).map(|x| dist_to_segment(q, x.a, x.b)).fold(f64::INFINITY, f64::min);
+                                assert!(near <= chord, "scene {si} receiver {tri} {gen:?} at s = {s}: {q} is {near:e} from its polyline");
+                            } else if exists {
+                                hidden += 1;
+                            }
+                        }
+                        // Across the curve, away from other segments and the receiver's sides.
+                        for w in points.windows(3) {
+                            let (q, dir) = (w[1], (w[2] - w[0]).normalize_or_zero());
+                            if dir == DVec2::ZERO || w[0].distance(w[2]) > 0.05 || (0..3).any(|k| dist_to_segment(q, rc.corners[k], rc.corners[(k + 1) % 3]) < 1e-5) {
+                                continue;
+                            }
+                            if m.segments.iter().any(|x| x.generator != gen && dist_to_segment(q, x.a, x.b) < 1e-5) {
+                                continue;
+                            }
+                            let off = dir.perp() * 1e-8;
+                            let judge = |p: DVec2| edge_labels(g, light, &m, li, rc.to3(p));
+                            assert_ne!(judge(q + off), judge(q - off), "scene {si} receiver {tri} {gen:?} at {q}: no discontinuity across");
+                            discontinuities += 1;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("{visible} visible EEE points ({bars} under the crossed bars), {hidden} hidden, {discontinuities} judged across");
+    assert!(visible > 200 && hidden > 20 && discontinuities > 100 && bars > 50, "{visible} visible, {hidden} hidden, {discontinuities} across, {bars} under the bars");
+}
+
 /// Euler's formula on every receiver of random scenes and of the Cornell box: V − E + F =
 /// 1 + C (F with the unbounded face, C the connected components), and every face's interior
 /// point lies in that face only.

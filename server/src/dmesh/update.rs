@@ -25,6 +25,7 @@ use super::grid::Grid;
 use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
 use super::segments::Segment;
+use super::eee::{self, EeeSurface};
 use super::receiver::LightAbove;
 use super::{arrangement, face_backprojections, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
@@ -57,6 +58,11 @@ pub struct UpdateStats {
     pub traces_untouched: usize,
     /// Dynamic traces recast.
     pub traces_recast: usize,
+    /// Static EEE surfaces re-intersected with the moved object, kept as they were, and
+    /// dynamic ones (an edge on the moved object) found again.
+    pub eee_reintersected: usize,
+    pub eee_untouched: usize,
+    pub eee_recast: usize,
     pub faces_kept: usize,
     pub faces_recomputed: usize,
     /// Receivers computed from scratch: the moved object's own, and static ones in or out
@@ -69,6 +75,8 @@ pub struct UpdateStats {
     pub reintersect_ns: u64,
     /// Dynamic traces recast (traced and intersected with every blocker).
     pub recast_ns: u64,
+    /// EEE surfaces: static ones re-intersected, dynamic ones found and intersected.
+    pub eee_ns: u64,
     /// 1D visibility and the arrangement.
     pub arrangement_ns: u64,
     /// Face backprojections (kept or redone).
@@ -82,7 +90,7 @@ macro_rules! add_fields {
 impl std::ops::Add for UpdateStats {
     type Output = UpdateStats;
     fn add(self, o: UpdateStats) -> UpdateStats {
-        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, receivers_kept_in_umbra, arrangements_kept, traces_reintersected, traces_untouched, traces_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, arrangement_ns, faces_ns)
+        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, receivers_kept_in_umbra, arrangements_kept, traces_reintersected, traces_untouched, traces_recast, eee_reintersected, eee_untouched, eee_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, eee_ns, arrangement_ns, faces_ns)
     }
 }
 
@@ -182,7 +190,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // occluder, the first of the blockers that covers: the same mesh.)
     if m.umbra && !m.faces.iter().any(|f| f.occluders.iter().any(|t| moved.contains(t))) {
         s.receivers_kept_in_umbra += 1;
-        return Some(ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
+        return Some(ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), eee: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
     }
     // In umbra before behind the object, or in umbra after: decided and built afresh.
     if m.umbra || umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol).is_some() {
@@ -233,11 +241,14 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     super::segments::canonical_order(&mut out);
     s.recast_ns += ns(t0);
     let t0 = Instant::now();
+    let eee = update_eee(m, g, light, &above, &blockers, &new_moved, (&moved, &verts), motion, near_new, s);
+    s.eee_ns += ns(t0);
+    let t0 = Instant::now();
     // The arrangement is a function of the receiver's corners and its segments: when 1D
     // visibility gives the old segments bit for bit (the object is among the blockers but
     // none of its surfaces shows, nor did one before, and it hides no static segment), the
     // old arrangement is the new one.
-    let segments = visible_segments(&receiver, &out);
+    let segments = visible_segments(g, &receiver, &blockers, &out, &eee);
     let arrangement = if same_segments(&segments, &m.segments) {
         s.arrangements_kept += 1;
         m.arrangement.clone()
@@ -288,7 +299,69 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     s.faces_kept += kept;
     s.faces_recomputed += redone;
     s.faces_ns += ns(t0);
-    Some(ReceiverMesh { receiver, shaft, blockers, traces: out, segments, arrangement, faces, umbra: false })
+    Some(ReceiverMesh { receiver, shaft, blockers, traces: out, eee, segments, arrangement, faces, umbra: false })
+}
+
+/// The receiver's EEE surfaces after the move (paper 002 §4.3.2): static ones (both edges
+/// on other objects) keep their parts — those depend on the edges, their triangles, the
+/// light and the receiver only — and, where their box meets the motion volume, are
+/// re-intersected with the moved object; dynamic ones (an edge on the moved object) are
+/// found again from the pairs of the moved object's candidate edges with each other and with
+/// the static ones, and intersected with every blocker.
+#[allow(clippy::too_many_arguments)] // the receiver before, the move and the stats, as `update_receiver` has them
+fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], new_moved: &[u32], (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
+    let r = &m.receiver;
+    let mut out = Vec::with_capacity(m.eee.len());
+    for e in &m.eee {
+        if verts.clone().any(|v| e.generator.uses_vertex(v)) {
+            continue;
+        }
+        if !boxes_meet(e.bbox, motion) {
+            out.push(e.clone());
+            s.eee_untouched += 1;
+            continue;
+        }
+        let mut u = e.clone();
+        u.hidden.retain(|h| !moved_tris.contains(&h.0));
+        if boxes_meet(e.bbox, near_new) {
+            let lines = e.lines(g);
+            let pencils = eee::Pencils::new(&lines, e.part);
+            let mut more = Vec::new();
+            for &t in new_moved {
+                e.hide(g, r, &lines, &pencils, t, &mut more);
+            }
+            u.hidden.extend(more);
+        }
+        sort_hidden(&mut u.hidden);
+        out.push(u);
+        s.eee_reintersected += 1;
+    }
+    if !new_moved.is_empty() {
+        let moved_edges = eee::edges_of(g, new_moved);
+        let mut runs = None;
+        let (mut first, mut rest) = (Vec::new(), Vec::new());
+        let mut static_edges = None;
+        for (li, e) in above.edges.iter().enumerate() {
+            let Some(e) = *e else { continue };
+            first.clear();
+            eee::candidates(g, light, r, e, &moved_edges, &mut first);
+            if first.is_empty() {
+                continue;
+            }
+            let static_edges = static_edges.get_or_insert_with(|| {
+                let others: Vec<u32> = blockers.iter().copied().filter(|t| !moved_tris.contains(t)).collect();
+                eee::edges_of(g, &others)
+            });
+            rest.clear();
+            eee::candidates(g, light, r, e, static_edges, &mut rest);
+            let runs = runs.get_or_insert_with(|| Runs::new(g, blockers, false));
+            let before = out.len();
+            eee::surfaces(g, light, r, li as u32, e, &rest, Some(&first), runs, &mut out);
+            s.eee_recast += out.len() - before;
+        }
+    }
+    eee::canonical_order(&mut out);
+    out
 }
 
 /// Whether two segment lists are the same, generators and ends bit for bit, in order.

@@ -100,11 +100,16 @@ fn diameter_and_centre(light: &LightPlane) -> (f64, DVec3) {
     (d, c.iter().copied().sum::<DVec3>() / c.len() as f64)
 }
 
-/// The blocker segment of a generator (a blocker vertex counts as a segment of no length).
-fn blocker_segment(g: &Geometry, gen: &Generator) -> (DVec3, DVec3) {
+/// The blocker segment of a generator (a blocker vertex counts as a segment of no length)
+/// for the mesh edge `at` (world).
+fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3, DVec3) {
     match *gen {
         Generator::Ve { edge, .. } => (g.pos[edge.0 as usize], g.pos[edge.1 as usize]),
         Generator::Ev { vertex, .. } => (g.pos[vertex as usize], g.pos[vertex as usize]),
+        // The first of the two blocker edges: both bound the same corner of the visible part.
+        Generator::Eee { edges: (edge, _), .. } => (g.pos[edge.0 as usize], g.pos[edge.1 as usize]),
+        // The blocker meets the receiver along the mesh edge `at` itself: no penumbra.
+        Generator::Contact { .. } => at,
     }
 }
 
@@ -161,7 +166,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, (diameter,
         let Some([ql, qr]) = sides(r, q0, q1) else { continue };
         let (ll, lr) = (lighting_at(m, g, light, ql, &mut hit), lighting_at(m, g, light, qr, &mut hit));
         let (p0, p1) = (r.to3(q0), r.to3(q1));
-        let (s0, s1) = blocker_segment(g, gen);
+        let (s0, s1) = blocker_segment(g, gen, (p0, p1));
         let width = |p: DVec3| penumbra_width_of(diameter, centre, p, r.n, s0, s1);
         let across = r.n.cross(p1 - p0).try_normalize().unwrap_or(DVec3::ZERO);
         let penumbra = [(across * width(p0)).as_vec3(), (across * width(p1)).as_vec3()];
