@@ -229,48 +229,71 @@ fn crossing_at(r: &Receiver, p: DVec3, q: DVec3, h: f64) -> Option<DVec3> {
     ((hp > 0.0) != (hq > 0.0)).then(|| p + (q - p) * (hp / (hp - hq)))
 }
 
-/// The parts of light edge `(y0, y1)` where the EEE surface of edges `e1`, `e2` exists on
-/// receiver `r`: its line meets both edges' segments, below the light and above the
-/// receiver (by the tolerance), in front of the light, both edges silhouettes seen from
-/// `y(s)`, and it ends inside the receiver triangle.
-pub fn parts(g: &Geometry, light: &LightPlane, r: &Receiver, lines: &Lines, e1: EdgeKey, e2: EdgeKey) -> Vec<(f64, f64)> {
+/// The parts of light edge `(y0, y1)` where the EEE surface of candidate edges `c1`, `c2`
+/// exists on receiver `r`: its line meets both edges' segments, below the light and above
+/// the receiver (by the tolerance), in front of the light, both edges silhouettes seen from
+/// `y(s)`, and it ends inside the receiver triangle. In two stages: first where the line
+/// meets both segments and both edges are silhouettes (linear cuts, and the candidates'
+/// own silhouette parts), which most pairs fail; then the rest.
+pub fn parts(light: &LightPlane, r: &Receiver, lines: &Lines, c1: &Candidate, c2: &Candidate) -> Vec<(f64, f64)> {
     let mut cuts = Vec::new();
     for (k, e) in [lines.e1, lines.e2].iter().enumerate() {
-        let other = 1 - k;
         for c in e {
-            roots(|s| lines.passes(s, *c, other), &mut cuts);
-        }
-        // Where the edge crosses the receiver's plane (raised by the tolerance).
-        if let Some(c) = crossing_at(r, e[0], e[1], r.tol) {
-            roots(|s| lines.passes(s, c, other), &mut cuts);
+            roots(|s| lines.passes(s, *c, 1 - k), &mut cuts);
         }
     }
-    for e in [e1, e2] {
-        for t in g.edge_tris.get(&e).into_iter().flatten() {
-            let [a, b, c] = g.tri(*t);
-            let n = (b - a).cross(c - a);
-            roots(|s| n.dot(lines.y(s) - a), &mut cuts);
+    cuts.extend(c1.silhouette.iter().chain(&c2.silhouette).flat_map(|p| [p.0, p.1]));
+    let first = pieces(0.0, 1.0, &mut cuts, |s| meets_both(lines, s) && c1.silhouette_at(s) && c2.silhouette_at(s));
+    let mut out = Vec::new();
+    for (lo, hi) in first {
+        let mut cuts = Vec::new();
+        for (k, e) in [lines.e1, lines.e2].iter().enumerate() {
+            // Where the edge crosses the receiver's plane (raised by the tolerance).
+            if let Some(c) = crossing_at(r, e[0], e[1], r.tol) {
+                roots(|s| lines.passes(s, c, 1 - k), &mut cuts);
+            }
         }
+        roots(|s| {
+            let (_, n1, n2) = lines.planes(s);
+            n1.cross(n2).dot(r.n)
+        }, &mut cuts);
+        for k in 0..3 {
+            let f = (r.to3(r.corners[k]), r.to3(r.corners[(k + 1) % 3]));
+            roots(|s| lines.meets_line(s, f), &mut cuts);
+        }
+        out.extend(pieces(lo, hi, &mut cuts, |s| lands(light, r, lines, s)));
     }
-    roots(|s| {
-        let (_, n1, n2) = lines.planes(s);
-        n1.cross(n2).dot(r.n)
-    }, &mut cuts);
-    for k in 0..3 {
-        let f = (r.to3(r.corners[k]), r.to3(r.corners[(k + 1) % 3]));
-        roots(|s| lines.meets_line(s, f), &mut cuts);
-    }
-    pieces(0.0, 1.0, &mut cuts, |s| exists(g, light, r, lines, e1, e2, s))
+    // Pieces of two stages that touch are one part.
+    out.dedup_by(|b, a| {
+        let touch = a.1 == b.0;
+        if touch {
+            a.1 = b.1;
+        }
+        touch
+    });
+    out
 }
 
-/// Whether the surface exists at `s` and its line ends inside the receiver.
-pub fn exists(g: &Geometry, light: &LightPlane, r: &Receiver, lines: &Lines, e1: EdgeKey, e2: EdgeKey, s: f64) -> bool {
+/// Whether the line from `y(s)` meets both edges' segments (strictly inside each): each
+/// edge's ends lie on opposite sides of the plane through `y(s)` and the other edge.
+fn meets_both(lines: &Lines, s: f64) -> bool {
+    let split = |e: &[DVec3; 2], other: usize| {
+        let (a, b) = (lines.passes(s, e[0], other), lines.passes(s, e[1], other));
+        (a > 0.0 && b < 0.0) || (a < 0.0 && b > 0.0)
+    };
+    split(&lines.e1, 1) && split(&lines.e2, 0)
+}
+
+/// Whether the line from `y(s)` through both edges meets them between the light and the
+/// receiver (above it by the tolerance), in front of the light, and ends inside the
+/// receiver triangle.
+fn lands(light: &LightPlane, r: &Receiver, lines: &Lines, s: f64) -> bool {
     let Some(l) = lines.ruling(r, s) else { return false };
     let inside = (0..2).all(|k| {
         let x = l.y + (l.end - l.y) * l.t[k];
         l.u[k] > 0.0 && l.u[k] < 1.0 && l.t[k] > 0.0 && l.t[k] < 1.0 && r.height(x) > r.tol && light.height(x) > 0.0
     });
-    inside && r.contains(r.to2(l.end)) && is_silhouette(g, l.y, e1, r.tol) && is_silhouette(g, l.y, e2, r.tol)
+    inside && r.contains(r.to2(l.end))
 }
 
 /// The planes through the ends of a part of the light edge, `y(lo)` and `y(hi)`, and each
@@ -384,7 +407,7 @@ impl EeeSurface {
     /// The surface's part `part` with its box (the lines from the light edge to the trace's
     /// polyline, grown by the chords' tolerance) and no intersections yet.
     fn new(r: &Receiver, lines: &Lines, light_edge: u32, (e1, e2): (EdgeKey, EdgeKey), part: (f64, f64)) -> EeeSurface {
-        let ends: Vec<DVec3> = arc(r, lines, part).iter().map(|(_, q)| r.to3(*q)).chain([lines.y(part.0), lines.y(part.1)]).collect();
+        let ends: Vec<DVec3> = arc(r, lines, part, 2).iter().map(|(_, q)| r.to3(*q)).chain([lines.y(part.0), lines.y(part.1)]).collect();
         let grow = 2.0 * chord_tolerance(r) + r.tol;
         let (lo, hi) = union_of(ends.iter().map(|p| (*p, *p)));
         EeeSurface { generator: Generator::Eee { light_edge, edges: (e1, e2) }, y0: lines.y0, y1: lines.y1, part, bbox: (lo - grow, hi + grow), hidden: Vec::new() }
@@ -443,7 +466,7 @@ impl EeeSurface {
         let (mut at, end) = self.part;
         let mut emit = |s0: f64, s1: f64| {
             if s1 > s0 {
-                let pts = arc(r, &lines, (s0, s1));
+                let pts = arc(r, &lines, (s0, s1), 0);
                 for w in pts.windows(2) {
                     out.push(Segment { generator: self.generator, a: w[0].1, b: w[1].1 });
                 }
@@ -474,26 +497,28 @@ fn chord_tolerance(r: &Receiver) -> f64 {
 }
 
 /// The trace's polyline over `(s0, s1)`: points on the arc, the chords within the
-/// tolerance of it at their middles (halving up to [`MAX_DEPTH`] times), points closer than
-/// ten tolerances to the last one kept dropped (the last point is always kept).
-pub fn arc(r: &Receiver, lines: &Lines, (s0, s1): (f64, f64)) -> Vec<(f64, DVec2)> {
+/// tolerance of it at their middles (halving at least `min_depth` and up to [`MAX_DEPTH`]
+/// times), points closer than ten tolerances to the last one kept dropped (the last point is
+/// always kept).
+pub fn arc(r: &Receiver, lines: &Lines, (s0, s1): (f64, f64), min_depth: u32) -> Vec<(f64, DVec2)> {
     let at = |s: f64| lines.ruling(r, s).map(|l| r.to2(l.end));
     let (Some(a), Some(b)) = (at(s0), at(s1)) else { return Vec::new() };
     let eps = chord_tolerance(r);
     let mut out = vec![(s0, a)];
-    fn split(at: &dyn Fn(f64) -> Option<DVec2>, (s0, a): (f64, DVec2), (s1, b): (f64, DVec2), eps: f64, depth: u32, out: &mut Vec<(f64, DVec2)>) {
+    let split_to = |depth: u32, off: f64| depth < min_depth || (off > eps && depth < MAX_DEPTH);
+    fn split(at: &dyn Fn(f64) -> Option<DVec2>, more: &dyn Fn(u32, f64) -> bool, (s0, a): (f64, DVec2), (s1, b): (f64, DVec2), depth: u32, out: &mut Vec<(f64, DVec2)>) {
         let sm = 0.5 * (s0 + s1);
         if let Some(m) = at(sm) {
             let off = (b - a).perp().try_normalize().map_or(m.distance(a), |n| n.dot(m - a).abs());
-            if depth < 2 || (off > eps && depth < MAX_DEPTH) {
-                split(at, (s0, a), (sm, m), eps, depth + 1, out);
-                split(at, (sm, m), (s1, b), eps, depth + 1, out);
+            if more(depth, off) {
+                split(at, more, (s0, a), (sm, m), depth + 1, out);
+                split(at, more, (sm, m), (s1, b), depth + 1, out);
                 return;
             }
         }
         out.push((s1, b));
     }
-    split(&at, (s0, a), (s1, b), eps, 0, &mut out);
+    split(&at, &split_to, (s0, a), (s1, b), 0, &mut out);
     let min = 10.0 * r.tol;
     let mut kept: Vec<(f64, DVec2)> = Vec::with_capacity(out.len());
     for (i, p) in out.iter().enumerate() {
@@ -513,18 +538,44 @@ pub fn arc(r: &Receiver, lines: &Lines, (s0, s1): (f64, f64)) -> Vec<(f64, DVec2
     kept
 }
 
-/// A blocker edge that may generate EEE surfaces with a light edge on a receiver: some point
-/// of the light edge may see it as a silhouette, and its shadow from the light edge (the box
-/// of its ends' shadows from the light edge's ends) meets the receiver's box.
-#[derive(Debug, Clone, Copy)]
+/// A blocker edge that may generate EEE surfaces with a light edge on a receiver: the parts
+/// of the light edge from which it is a silhouette (none: not a candidate), and the box of
+/// its shadow from the light edge (of its ends' shadows from the light edge's ends), which
+/// meets the receiver's box.
+#[derive(Debug, Clone)]
 pub struct Candidate {
     pub edge: EdgeKey,
     pub shadow: (DVec2, DVec2),
+    pub silhouette: Vec<(f64, f64)>,
 }
 
-/// The candidate edges among `edges` for light edge `(y0, y1)` on `r`.
-pub fn candidates(g: &Geometry, light: &LightPlane, r: &Receiver, (y0, y1): (DVec3, DVec3), edges: &[EdgeKey], out: &mut Vec<Candidate>) {
+impl Candidate {
+    fn silhouette_at(&self, s: f64) -> bool {
+        self.silhouette.iter().any(|p| s > p.0 && s < p.1)
+    }
+}
+
+/// The parts of light edge `(y0, y1)` from which edge `e` is a silhouette: it can turn into
+/// or out of one only where the light edge crosses the plane of one of its triangles.
+fn silhouette_parts(g: &Geometry, (y0, y1): (DVec3, DVec3), e: EdgeKey, tol: f64) -> Vec<(f64, f64)> {
+    let mut cuts = Vec::new();
+    for t in g.edge_tris.get(&e).into_iter().flatten() {
+        let [a, b, c] = g.tri(*t);
+        let n = (b - a).cross(c - a);
+        let (d0, d1) = (n.dot(y0 - a), n.dot(y1 - a));
+        if (d0 > 0.0) != (d1 > 0.0) {
+            cuts.push(d0 / (d0 - d1));
+        }
+    }
+    pieces(0.0, 1.0, &mut cuts, |s| is_silhouette(g, y0 + (y1 - y0) * s, e, tol))
+}
+
+/// The candidate edges among `edges` for light edge `(y0, y1)` on `r`, their shadows within
+/// box `within` (receiver frame; the receiver's box when `None`).
+#[allow(clippy::too_many_arguments)] // the light edge, the edges and where their shadows must fall
+pub fn candidates(g: &Geometry, light: &LightPlane, r: &Receiver, (y0, y1): (DVec3, DVec3), edges: &[EdgeKey], within: Option<(DVec2, DVec2)>, out: &mut Vec<Candidate>) {
     let rb = r.corners.iter().fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
+    let rb = within.map_or(rb, |w| (rb.0.max(w.0), rb.1.min(w.1)));
     let (h0, h1) = (r.height(y0), r.height(y1));
     let top = h0.min(h1) - r.tol;
     for &e in edges {
@@ -558,13 +609,9 @@ pub fn candidates(g: &Geometry, light: &LightPlane, r: &Receiver, (y0, y1): (DVe
         if shadow.0.cmpgt(shadow.1 + r.tol).any() {
             continue;
         }
-        let edge_planes_cross = g.edge_tris.get(&e).into_iter().flatten().any(|t| {
-            let [p, q, c] = g.tri(*t);
-            let n = (q - p).cross(c - p);
-            (n.dot(y0 - p) > 0.0) != (n.dot(y1 - p) > 0.0)
-        });
-        if edge_planes_cross || is_silhouette(g, y0, e, r.tol) || is_silhouette(g, y1, e, r.tol) {
-            out.push(Candidate { edge: e, shadow });
+        let silhouette = silhouette_parts(g, (y0, y1), e, r.tol);
+        if !silhouette.is_empty() {
+            out.push(Candidate { edge: e, shadow, silhouette });
         }
     }
 }
@@ -613,19 +660,21 @@ fn may_meet(lines: &Lines) -> bool {
 
 /// The EEE surfaces of the pairs of `cands` (one at least from `first`, the rest from
 /// `cands`; every pair of `cands` when `first` is `None`) with light edge `li`, each part
-/// intersected with `blockers`, appended to `out`.
+/// intersected with `blockers`, appended to `out`. Pairs whose shadow boxes miss each other
+/// are passed over by a sweep along the boxes' x.
 #[allow(clippy::too_many_arguments)] // the light edge, its candidates and the receiver's blockers, as the straight traces take them
 pub fn surfaces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, edge: (DVec3, DVec3), cands: &[Candidate], first: Option<&[Candidate]>, blockers: &Runs, out: &mut Vec<EeeSurface>) {
     let mut one = |c1: &Candidate, c2: &Candidate| {
-        let (e1, e2) = if c1.edge < c2.edge { (c1.edge, c2.edge) } else { (c2.edge, c1.edge) };
-        if !apart(e1, e2) || c1.shadow.0.cmpgt(c2.shadow.1 + r.tol).any() || c2.shadow.0.cmpgt(c1.shadow.1 + r.tol).any() {
+        let (c1, c2) = if c1.edge < c2.edge { (c1, c2) } else { (c2, c1) };
+        let (e1, e2) = (c1.edge, c2.edge);
+        if !apart(e1, e2) || c1.shadow.0.y > c2.shadow.1.y + r.tol || c2.shadow.0.y > c1.shadow.1.y + r.tol {
             return;
         }
         let lines = Lines::new(g, edge, e1, e2);
         if !may_meet(&lines) {
             return;
         }
-        for part in parts(g, light, r, &lines, e1, e2) {
+        for part in parts(light, r, &lines, c1, c2) {
             let mut s = EeeSurface::new(r, &lines, li, (e1, e2), part);
             let pencils = Pencils::new(&lines, part);
             let mut hidden = Vec::new();
@@ -641,22 +690,52 @@ pub fn surfaces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, edge: (
             out.push(s);
         }
     };
-    match first {
-        None => {
-            for i in 0..cands.len() {
-                for j in i + 1..cands.len() {
-                    one(&cands[i], &cands[j]);
+    // Both lists by the shadows' least x; a pair is looked at from its member that starts
+    // first, over the other list's members that start before its end.
+    fn by_x(v: &[Candidate]) -> Vec<&Candidate> {
+        let mut v: Vec<&Candidate> = v.iter().collect();
+        v.sort_by(|a, b| a.shadow.0.x.total_cmp(&b.shadow.0.x));
+        v
+    }
+    let tol = r.tol;
+    let sweep = |a: &[&Candidate], b: &[&Candidate], same: bool, one: &mut dyn FnMut(&Candidate, &Candidate)| {
+        // Each a[i] with the b[j] whose start lies in [a[i]'s start, a[i]'s end]; when the
+        // lists differ, also the other way round (b[j] starting first).
+        let mut from = 0;
+        for (i, x) in a.iter().enumerate() {
+            while from < b.len() && b[from].shadow.0.x < x.shadow.0.x {
+                from += 1;
+            }
+            let start = if same { i + 1 } else { from };
+            for y in &b[start.max(from)..] {
+                if y.shadow.0.x > x.shadow.1.x + tol {
+                    break;
                 }
+                one(x, y);
             }
         }
+    };
+    match first {
+        None => {
+            let a = by_x(cands);
+            sweep(&a, &a, true, &mut one);
+        }
         Some(first) => {
-            // Pairs of `first` with each other once, and with the rest.
-            for i in 0..first.len() {
-                for j in i + 1..first.len() {
-                    one(&first[i], &first[j]);
+            let (f, c) = (by_x(first), by_x(cands));
+            sweep(&f, &f, true, &mut one);
+            sweep(&f, &c, false, &mut one);
+            // The rest's members that start strictly before a member of `first`.
+            let mut pairs = |y: &Candidate, x: &Candidate| one(x, y);
+            let mut from = 0;
+            for x in &c {
+                while from < f.len() && f[from].shadow.0.x <= x.shadow.0.x {
+                    from += 1;
                 }
-                for c in cands {
-                    one(&first[i], c);
+                for y in &f[from..] {
+                    if y.shadow.0.x > x.shadow.1.x + tol {
+                        break;
+                    }
+                    pairs(y, x);
                 }
             }
         }
@@ -687,7 +766,7 @@ pub fn receiver_surfaces(g: &Geometry, light: &LightPlane, above: &LightAbove, r
     for (li, e) in above.edges.iter().enumerate() {
         let Some(e) = *e else { continue };
         cands.clear();
-        candidates(g, light, r, e, &edges, &mut cands);
+        candidates(g, light, r, e, &edges, None, &mut cands);
         if cands.len() < 2 {
             continue;
         }

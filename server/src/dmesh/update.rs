@@ -22,7 +22,7 @@
 //! mismatches).
 use super::geometry::{boxes_meet, Geometry};
 use super::grid::Grid;
-use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
+use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, Step, TraceVis};
 use super::face::none_can_hide;
 use super::segments::Segment;
 use super::eee::{self, EeeSurface};
@@ -311,6 +311,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
 #[allow(clippy::too_many_arguments)] // the receiver before, the move and the stats, as `update_receiver` has them
 fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], new_moved: &[u32], (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
     let r = &m.receiver;
+    let moved_runs = Runs::new(g, new_moved, false);
     let mut out = Vec::with_capacity(m.eee.len());
     for e in &m.eee {
         if verts.clone().any(|v| e.generator.uses_vertex(v)) {
@@ -327,9 +328,13 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
             let lines = e.lines(g);
             let pencils = eee::Pencils::new(&lines, e.part);
             let mut more = Vec::new();
-            for &t in new_moved {
-                e.hide(g, r, &lines, &pencils, t, &mut more);
-            }
+            moved_runs.walk(|step| match step {
+                Step::Open(b) => boxes_meet(*b, e.bbox) && !pencils.box_apart(b),
+                Step::Triangle(t) => {
+                    e.hide(g, r, &lines, &pencils, t, &mut more);
+                    true
+                }
+            });
             u.hidden.extend(more);
         }
         sort_hidden(&mut u.hidden);
@@ -344,7 +349,7 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
         for (li, e) in above.edges.iter().enumerate() {
             let Some(e) = *e else { continue };
             first.clear();
-            eee::candidates(g, light, r, e, &moved_edges, &mut first);
+            eee::candidates(g, light, r, e, &moved_edges, None, &mut first);
             if first.is_empty() {
                 continue;
             }
@@ -353,7 +358,10 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
                 eee::edges_of(g, &others)
             });
             rest.clear();
-            eee::candidates(g, light, r, e, static_edges, &mut rest);
+            // Only static edges whose shadow meets a moved edge's can pair with one.
+            let near = first.iter().fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), c| (lo.min(c.shadow.0), hi.max(c.shadow.1)));
+            let near = (near.0 - r.tol, near.1 + r.tol);
+            eee::candidates(g, light, r, e, static_edges, Some(near), &mut rest);
             let runs = runs.get_or_insert_with(|| Runs::new(g, blockers, false));
             let before = out.len();
             eee::surfaces(g, light, r, li as u32, e, &rest, Some(&first), runs, &mut out);
