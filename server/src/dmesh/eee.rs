@@ -231,7 +231,7 @@ fn crossing_at(r: &Receiver, p: DVec3, q: DVec3, h: f64) -> Option<DVec3> {
 
 /// The parts of light edge `(y0, y1)` where the EEE surface of candidate edges `c1`, `c2`
 /// exists on receiver `r`: its line meets both edges' segments, below the light and above
-/// the receiver (by the tolerance), in front of the light, both edges silhouettes seen from
+/// the receiver, in front of the light, both edges silhouettes seen from
 /// `y(s)`, and it ends inside the receiver triangle. In two stages: first where the line
 /// meets both segments and both edges are silhouettes (linear cuts, and the candidates'
 /// own silhouette parts), which most pairs fail; then the rest.
@@ -248,8 +248,9 @@ pub fn parts(light: &LightPlane, r: &Receiver, lines: &Lines, c1: &Candidate, c2
     for (lo, hi) in first {
         let mut cuts = Vec::new();
         for (k, e) in [lines.e1, lines.e2].iter().enumerate() {
-            // Where the edge crosses the receiver's plane (raised by the tolerance).
-            if let Some(c) = crossing_at(r, e[0], e[1], r.tol) {
+            // Where the edge crosses the receiver's plane (there the surface ends on the
+            // blocker's contact with the receiver, [`super::segments::contacts`]).
+            if let Some(c) = crossing_at(r, e[0], e[1], 0.0) {
                 roots(|s| lines.passes(s, c, 1 - k), &mut cuts);
             }
         }
@@ -285,13 +286,13 @@ fn meets_both(lines: &Lines, s: f64) -> bool {
 }
 
 /// Whether the line from `y(s)` through both edges meets them between the light and the
-/// receiver (above it by the tolerance), in front of the light, and ends inside the
+/// receiver (above its plane), in front of the light, and ends inside the
 /// receiver triangle.
 fn lands(light: &LightPlane, r: &Receiver, lines: &Lines, s: f64) -> bool {
     let Some(l) = lines.ruling(r, s) else { return false };
     let inside = (0..2).all(|k| {
         let x = l.y + (l.end - l.y) * l.t[k];
-        l.u[k] > 0.0 && l.u[k] < 1.0 && l.t[k] > 0.0 && l.t[k] < 1.0 && r.height(x) > r.tol && light.height(x) > 0.0
+        l.u[k] > 0.0 && l.u[k] < 1.0 && l.t[k] > 0.0 && l.t[k] < 1.0 && r.height(x) > 0.0 && light.height(x) > 0.0
     });
     inside && r.contains(r.to2(l.end))
 }
@@ -583,8 +584,12 @@ pub fn candidates(g: &Geometry, light: &LightPlane, r: &Receiver, (y0, y1): (DVe
         if light.height(a) <= 0.0 && light.height(b) <= 0.0 {
             continue;
         }
-        // The edge's part above the receiver's plane.
-        let (ha, hb) = (r.height(a) - r.tol, r.height(b) - r.tol);
+        // The edge's part above the receiver's plane, of an edge that rises above it by
+        // more than the tolerance (as VE traces take them).
+        let (ha, hb) = (r.height(a), r.height(b));
+        if ha.max(hb) <= r.tol {
+            continue;
+        }
         let (a, b) = match (ha > 0.0, hb > 0.0) {
             (false, false) => continue,
             (true, true) => (a, b),

@@ -129,7 +129,13 @@ fn ve_ends(g: &Geometry, light: &LightPlane, r: &Receiver, v: DVec3, edge: EdgeK
     let hv = r.height(v);
     let (ha, hb) = (r.height(a), r.height(b));
     // Between the receiver's plane and the light corner's height, and in front of the light.
-    let t = keep_positive((0.0, 1.0), ha - r.tol, hb - r.tol)?;
+    // The edge's part above the receiver's plane, of an edge that rises above it by more
+    // than the tolerance: clipped at the plane itself, so that the trace of an edge through
+    // the plane starts where the blocker's contact with it ends ([`contacts`]).
+    if ha.max(hb) <= r.tol {
+        return None;
+    }
+    let t = keep_positive((0.0, 1.0), ha, hb)?;
     let t = keep_positive(t, hv - ha - r.tol, hv - hb - r.tol)?;
     let t = keep_positive(t, light.height(a), light.height(b))?;
     let map = |t: f64| {
@@ -323,7 +329,11 @@ pub fn traces_with(g: &Geometry, light: &LightPlane, above: &LightAbove, r: &Rec
 /// triangle (paper 002 §2's mesh holds the receiver's intersections with the other
 /// polygons): on one side the blocker stands above the receiver and may hide the light
 /// right up to the line, on the other it is below and hides nothing — a discontinuity that
-/// no surface of the light makes. `blockers` sorted; appended to `out` in their order.
+/// no surface of the light makes. The traces of the blocker's edges (VE, EEE) start on it
+/// and the hidden parts of other traces end on it: all are clipped at the plane itself (at
+/// the tolerance's height a shallow edge left a gap of a few tolerances between them, through
+/// which one face joined the blocker's umbra to the light beside it). `blockers` sorted;
+/// appended to `out` in their order.
 pub fn contacts(g: &Geometry, r: &Receiver, blockers: &[u32], out: &mut Vec<Segment>) {
     for &t in blockers {
         let tri = g.tri(t);

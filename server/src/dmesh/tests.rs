@@ -379,7 +379,7 @@ fn eee_surfaces_equal_a_brute_force_enumeration() {
                             let u2 = n1.dot(y - a2) / n1.dot(b2 - a2);
                             let (x1, x2) = (a1 + (b1 - a1) * u1, a2 + (b2 - a2) * u2);
                             let hy = rc.height(y);
-                            let ok_x = |x: DVec3, u: f64| u > 0.0 && u < 1.0 && rc.height(x) > rc.tol && rc.height(x) < hy && light.height(x) > 0.0;
+                            let ok_x = |x: DVec3, u: f64| u > 0.0 && u < 1.0 && rc.height(x) > 0.0 && rc.height(x) < hy && light.height(x) > 0.0;
                             let mut exists = ok_x(x1, u1) && ok_x(x2, u2) && x1.distance(x2) > 1e-9;
                             let mut end = DVec3::ZERO;
                             if exists {
