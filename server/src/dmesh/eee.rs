@@ -405,13 +405,15 @@ fn ruling_segment(lines: &Lines, r: &Receiver, s: f64) -> Option<(DVec3, DVec3)>
 }
 
 impl EeeSurface {
-    /// The surface's part `part` with its box (the lines from the light edge to the trace's
-    /// polyline, grown by the chords' tolerance) and no intersections yet.
-    fn new(r: &Receiver, lines: &Lines, light_edge: u32, (e1, e2): (EdgeKey, EdgeKey), part: (f64, f64)) -> EeeSurface {
-        let ends: Vec<DVec3> = arc(r, lines, part, 2).iter().map(|(_, q)| r.to3(*q)).chain([lines.y(part.0), lines.y(part.1)]).collect();
-        let grow = 2.0 * chord_tolerance(r) + r.tol;
-        let (lo, hi) = union_of(ends.iter().map(|p| (*p, *p)));
-        EeeSurface { generator: Generator::Eee { light_edge, edges: (e1, e2) }, y0: lines.y0, y1: lines.y1, part, bbox: (lo - grow, hi + grow), hidden: Vec::new() }
+    /// The surface's part `part` with its box and no intersections yet. Its lines run from
+    /// the light edge's part to the receiver, where they end inside both edges' shadows
+    /// (`shadow`, the two candidates' shadow boxes met): the box holds those ends' box and
+    /// the light edge's part, grown by the tolerance.
+    fn new(r: &Receiver, lines: &Lines, light_edge: u32, (e1, e2): (EdgeKey, EdgeKey), part: (f64, f64), shadow: (DVec2, DVec2)) -> EeeSurface {
+        let (a, b) = (shadow.0, shadow.1);
+        let ends = [DVec2::new(a.x, a.y), DVec2::new(b.x, a.y), DVec2::new(b.x, b.y), DVec2::new(a.x, b.y)].map(|q| r.to3(q));
+        let (lo, hi) = union_of(ends.iter().chain(&[lines.y(part.0), lines.y(part.1)]).map(|p| (*p, *p)));
+        EeeSurface { generator: Generator::Eee { light_edge, edges: (e1, e2) }, y0: lines.y0, y1: lines.y1, part, bbox: (lo - r.tol, hi + r.tol), hidden: Vec::new() }
     }
 
     pub fn edges(&self) -> (EdgeKey, EdgeKey) {
@@ -680,7 +682,8 @@ pub fn surfaces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, edge: (
             return;
         }
         for part in parts(light, r, &lines, c1, c2) {
-            let mut s = EeeSurface::new(r, &lines, li, (e1, e2), part);
+            let shadow = (c1.shadow.0.max(c2.shadow.0) - r.tol, c1.shadow.1.min(c2.shadow.1) + r.tol);
+            let mut s = EeeSurface::new(r, &lines, li, (e1, e2), part, shadow);
             let pencils = Pencils::new(&lines, part);
             let mut hidden = Vec::new();
             blockers.walk(|step| match step {

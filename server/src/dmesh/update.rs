@@ -317,16 +317,19 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
         if verts.clone().any(|v| e.generator.uses_vertex(v)) {
             continue;
         }
-        if !boxes_meet(e.bbox, motion) {
+        // A surface whose box misses the motion volume, or whose lines pass it by on one
+        // side of an edge's planes over the whole part, meets the moved object neither before
+        // nor after.
+        let lines = e.lines(g);
+        let pencils = eee::Pencils::new(&lines, e.part);
+        if !boxes_meet(e.bbox, motion) || pencils.box_apart(&motion) {
             out.push(e.clone());
             s.eee_untouched += 1;
             continue;
         }
         let mut u = e.clone();
         u.hidden.retain(|h| !moved_tris.contains(&h.0));
-        if boxes_meet(e.bbox, near_new) {
-            let lines = e.lines(g);
-            let pencils = eee::Pencils::new(&lines, e.part);
+        if boxes_meet(e.bbox, near_new) && !pencils.box_apart(&near_new) {
             let mut more = Vec::new();
             moved_runs.walk(|step| match step {
                 Step::Open(b) => boxes_meet(*b, e.bbox) && !pencils.box_apart(b),
