@@ -778,7 +778,10 @@ pub fn receiver_surfaces(g: &Geometry, light: &LightPlane, above: &LightAbove, r
         if cands.len() < 2 {
             continue;
         }
-        let runs = runs.get_or_insert_with(|| Runs::new(g, blockers, false));
+        // In curve order for a long list (the intervals are sorted after, so the order does
+        // not change them): under the grid over the dragon the list's runs are strips of the
+        // scan, and a surface's pencils passed over few of them.
+        let runs = runs.get_or_insert_with(|| Runs::for_traces(g, blockers, cands.len()));
         surfaces(g, light, r, li as u32, e, &cands, None, runs, &mut out);
     }
     canonical_order(&mut out);

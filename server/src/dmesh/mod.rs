@@ -3,7 +3,9 @@
 //! that it keeps up to date).
 //!
 //! Per area light and receiver triangle: the visible discontinuity segments of the EV
-//! surfaces with the vertex or the edge on the light ([`segments`]), their planar
+//! surfaces with the vertex or the edge on the light ([`segments`]), of the EEE surfaces
+//! with an edge on the light ([`eee`], as polylines on their conic traces) and the blockers'
+//! contacts with the receiver's plane, their planar
 //! arrangement as a half-edge structure with faces ([`arrangement`]), and each face's
 //! backprojection ([`face`]). The scene's triangles are listed in a uniform grid
 //! ([`grid`]) that finds each receiver's shaft blockers ([`receiver`]).

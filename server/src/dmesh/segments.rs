@@ -1,6 +1,7 @@
 //! Discontinuity segments on one receiver face from one area light (paper 002 §2, after
 //! Drettakis and Fiume's complete discontinuity mesh): the traces of the EV surfaces with
-//! the vertex or the edge on the light,
+//! the vertex or the edge on the light (the EEE surfaces are [`super::eee`]'s, the
+//! blockers' contacts with the receiver [`contacts`]),
 //!
 //! - **VE** — light corner `v` × blocker edge `ab`: the fan of rays from `v` through `ab`,
 //!   beyond it; a discontinuity where `ab` is a silhouette seen from `v` (the triangles at

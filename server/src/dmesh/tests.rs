@@ -1,7 +1,8 @@
 //! The mesh against its oracles: the pointwise backprojection
 //! (`edgepoint_scene::backprojection`) at random points of every face, a brute-force
 //! enumeration of every light-corner × edge and light-edge × vertex pair judged by what
-//! the light looks like on either side of the trace, and Euler's formula per receiver.
+//! the light looks like on either side of the trace, the same for every light-edge × edge
+//! × edge triple (EEE), and Euler's formula per receiver.
 use super::geometry::{edge_key, EdgeKey, Geometry};
 use super::segments::Generator;
 use super::*;

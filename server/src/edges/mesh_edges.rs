@@ -4,9 +4,10 @@
 //! Each side of a mesh edge sees the whole light (*lit*), none of it (*umbra*) or a part
 //! (*penumbra*): decided by the pointwise backprojection ([`crate::dmesh::face::visible_at`])
 //! just beside the edge's middle, on either side — not from the face's own backprojection,
-//! which is taken at one interior point: where the mesh lacks a surface (EEE and
-//! non-emitter EV surfaces are not built) one face can hold points that see different
-//! amounts of the light, and the edge is what the EPI needs right. A mesh edge is
+//! which is taken at one interior point: where the mesh lacks a surface (non-emitter EV
+//! surfaces and EEE surfaces with no edge on the light are not built; the EEE polylines
+//! stand within a chord tolerance of their curves) one face can hold points that see
+//! different amounts of the light, and the edge is what the EPI needs right. A mesh edge is
 //!
 //! - **extremal** when it separates two of those kinds: lit | penumbra is the penumbra's
 //!   outer boundary ([`EdgeKind::ShadowPenumbral`]), umbra | penumbra the umbra's
