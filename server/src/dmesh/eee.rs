@@ -301,27 +301,42 @@ fn lands(light: &LightPlane, r: &Receiver, lines: &Lines, s: f64) -> bool {
 /// blocker edge: as `s` runs over the part, the plane through `y(s)` and an edge turns about
 /// the edge (a pencil of planes), and a point's side of it is linear in `s`, so its sides at
 /// the two ends decide its side throughout.
+///
+/// The lines also lie in the planes through the light edge's line and their point on the
+/// first blocker edge; a point's side of those is linear in that point's parameter along the
+/// edge, which moves monotonically with `s` (a projective map): a third pencil, about the
+/// light edge, for the same test.
 #[derive(Debug, Clone, Copy)]
 pub struct Pencils {
     part: (f64, f64),
-    /// `[end][edge]`: normal and offset (`n · x = d` on the plane).
-    at: [[(DVec3, f64); 2]; 2],
+    /// `[end][pencil]`: normal and offset (`n · x = d` on the plane); pencil 2 about the
+    /// light edge is all zeros (no test) when a line at an end is missing.
+    at: [[(DVec3, f64); 3]; 2],
 }
 
 impl Pencils {
-    pub fn new(lines: &Lines, part: (f64, f64)) -> Pencils {
-        let at = [part.0, part.1].map(|s| {
-            let (y, n1, n2) = lines.planes(s);
-            [(n1, n1.dot(y)), (n2, n2.dot(y))]
+    pub fn new(lines: &Lines, r: &Receiver, part: (f64, f64)) -> Pencils {
+        let ends = [part.0, part.1].map(|s| (lines.planes(s), lines.ruling(r, s)));
+        let about_light = ends.iter().all(|e| e.1.is_some());
+        let at = ends.map(|((y, n1, n2), l)| {
+            let light = match l {
+                Some(l) if about_light => {
+                    let x = lines.e1[0] + (lines.e1[1] - lines.e1[0]) * l.u[0];
+                    let n = (lines.y1 - lines.y0).cross(x - lines.y0);
+                    (n, n.dot(lines.y0))
+                }
+                _ => (DVec3::ZERO, 0.0),
+            };
+            [(n1, n1.dot(y)), (n2, n2.dot(y)), light]
         });
         Pencils { part, at }
     }
 
-    /// Whether box `b` lies strictly on one side of an edge's plane over the whole part (the
+    /// Whether box `b` lies strictly on one side of a pencil's plane over the whole part (the
     /// same side at both ends): no line of the surface there crosses it.
     pub fn box_apart(&self, b: &(DVec3, DVec3)) -> bool {
         let (mid, ext) = ((b.0 + b.1) * 0.5, (b.1 - b.0) * 0.5);
-        (0..2).any(|k| {
+        (0..3).any(|k| {
             let side = |e: usize| {
                 let (n, d) = self.at[e][k];
                 let (c, r) = (n.dot(mid) - d, n.abs().dot(ext));
@@ -336,6 +351,24 @@ impl Pencils {
             let a = side(0);
             a != 0 && a == side(1)
         })
+    }
+
+    /// Whether the corners of `tri` lie strictly on one side of pencil `k`'s plane at both
+    /// ends, the same side.
+    fn apart(&self, k: usize, tri: &[DVec3; 3]) -> bool {
+        let side = |e: usize| {
+            let (n, d) = self.at[e][k];
+            let f = tri.map(|c| n.dot(c) - d);
+            if f.iter().all(|v| *v > 0.0) {
+                1
+            } else if f.iter().all(|v| *v < 0.0) {
+                -1
+            } else {
+                0
+            }
+        };
+        let a = side(0);
+        a != 0 && a == side(1)
     }
 
     /// The smallest interval of the part outside which the plane through `y(s)` and edge `k`
@@ -444,6 +477,9 @@ impl EeeSurface {
         }
         // Only where the triangle reaches across the planes through y(s) and each edge (two
         // pencils of planes about the edges) can the line there cross it.
+        if pencils.apart(2, &tri) {
+            return;
+        }
         let Some((lo, hi)) = pencils.straddled(0, &tri, self.part).and_then(|p| pencils.straddled(1, &tri, p)) else { return };
         let mut cuts = Vec::new();
         let map = |x: f64| lo + (hi - lo) * x;
@@ -684,7 +720,7 @@ pub fn surfaces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, edge: (
         for part in parts(light, r, &lines, c1, c2) {
             let shadow = (c1.shadow.0.max(c2.shadow.0) - r.tol, c1.shadow.1.min(c2.shadow.1) + r.tol);
             let mut s = EeeSurface::new(r, &lines, li, (e1, e2), part, shadow);
-            let pencils = Pencils::new(&lines, part);
+            let pencils = Pencils::new(&lines, r, part);
             let mut hidden = Vec::new();
             blockers.walk(|step| match step {
                 Step::Open(b) => boxes_meet(*b, s.bbox) && !pencils.box_apart(b),

@@ -326,7 +326,7 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
         // side of an edge's planes over the whole part, meets the moved object neither before
         // nor after.
         let lines = e.lines(g);
-        let pencils = eee::Pencils::new(&lines, e.part);
+        let pencils = eee::Pencils::new(&lines, r, e.part);
         if !boxes_meet(e.bbox, motion) || pencils.box_apart(&motion) {
             out.push(e.clone());
             s.eee_untouched += 1;
