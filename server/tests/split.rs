@@ -58,7 +58,26 @@ async fn a_part_lost_with_a_killed_worker_is_shaded_again_and_the_sum_is_whole()
         }
     }
     assert_eq!(want.len(), 24 * 256);
+    // A worker killed just after it took a batch may already have sent every answer it
+    // held (the answers are on the socket before the kill drops its runtime): that run
+    // completes without a requeue and shows nothing of the path under test. Each run is
+    // checked whole; up to ten runs are made until one kills the worker while it holds
+    // batches (about one run in three did not, on two cores).
+    for attempt in 0..10 {
+        let stats = kill_while_shading(&batches, &want, parts).await;
+        assert_eq!(stats.dropped_batches, 0);
+        if stats.requeued_batches > 0 {
+            return;
+        }
+        eprintln!("run {attempt}: the killed worker had answered all it held: {stats:?}");
+    }
+    panic!("in ten runs the killed worker's batches never went back to the queue");
+}
 
+/// Shades `batches` on two workers, killing the first once it holds a batch; every sample
+/// completes equal to `want` (the unsplit shading). The dispatcher's counts.
+async fn kill_while_shading(batches: &[pb::RequestBatch], want: &HashMap<u64, (bool, Vec3)>, parts: u32) -> edgepoint_server::workers::DispatchStats {
+    let batches = batches.to_vec();
     let (mut a, b) = (Worker::spawn(), Worker::spawn());
     let pool = WorkerPool::new(vec![a.url.clone(), b.url.clone()]).unwrap();
     let source = pb::builtin_source("rooms");
@@ -101,9 +120,8 @@ async fn a_part_lost_with_a_killed_worker_is_shaded_again_and_the_sum_is_whole()
     }
     assert_eq!(complete, 24 * 256, "every sample completes");
     assert_eq!(sums.waiting(), 0);
-    let stats = d.stats();
-    assert!(stats.requeued_batches > 0, "the killed worker's batches went back to the queue: {stats:?}");
-    assert_eq!(stats.dropped_batches, 0);
+    drop(b);
+    d.stats()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
