@@ -83,7 +83,8 @@ fn meet(y: DVec3, d: DVec3, p: DVec3, q: DVec3) -> Option<(f64, f64)> {
     let e = q - p;
     let c = e.cross(d);
     let cc = c.length_squared();
-    if !(cc > 1e-300) {
+    // (NaN fails too.)
+    if cc.is_nan() || cc <= 1e-300 {
         return None;
     }
     let u = (y - p).cross(d).dot(c) / cc;
@@ -121,7 +122,7 @@ impl Lines {
         let (y, n1, n2) = self.planes(s);
         let mut d = n1.cross(n2);
         let dn = d.dot(r.n);
-        if !(dn.abs() > 1e-300) {
+        if dn.is_nan() || dn.abs() <= 1e-300 {
             return None;
         }
         if dn > 0.0 {
@@ -159,7 +160,7 @@ impl Lines {
 fn roots(f: impl Fn(f64) -> f64, out: &mut Vec<f64>) {
     let (f0, fh, f1) = (f(0.0), f(0.5), f(1.0));
     let scale = f0.abs().max(fh.abs()).max(f1.abs());
-    if !(scale > 0.0) || !scale.is_finite() {
+    if !scale.is_finite() || scale <= 0.0 {
         return;
     }
     let a = 2.0 * (f0 + f1) - 4.0 * fh;
@@ -418,7 +419,7 @@ pub fn pierces(p: DVec3, q: DVec3, tri: &[DVec3; 3]) -> bool {
     let (e1, e2) = (tri[1] - tri[0], tri[2] - tri[0]);
     let h = d.cross(e2);
     let det = e1.dot(h);
-    if !(det.abs() > 1e-300) {
+    if det.is_nan() || det.abs() <= 1e-300 {
         return false;
     }
     let w = p - tri[0];
@@ -497,6 +498,18 @@ impl EeeSurface {
         for (h0, h1) in pieces(lo, hi, &mut cuts, |s| ruling_segment(lines, r, s).is_some_and(|(p, q)| pierces(p, q, &tri))) {
             out.push((t, h0, h1));
         }
+    }
+
+    /// [`EeeSurface::hide`] for the triangles of `runs`, a run or a group of runs passed over
+    /// when its box misses the surface's or lies apart from a pencil.
+    pub fn hide_all(&self, g: &Geometry, r: &Receiver, lines: &Lines, pencils: &Pencils, runs: &Runs, out: &mut Vec<(u32, f64, f64)>) {
+        runs.walk(|step| match step {
+            Step::Open(b) => boxes_meet(*b, self.bbox) && !pencils.box_apart(b),
+            Step::Triangle(t) => {
+                self.hide(g, r, lines, pencils, t, out);
+                true
+            }
+        });
     }
 
     /// The visible parts' polylines as segments, appended to `out`.
@@ -722,13 +735,7 @@ pub fn surfaces(g: &Geometry, light: &LightPlane, r: &Receiver, li: u32, edge: (
             let mut s = EeeSurface::new(r, &lines, li, (e1, e2), part, shadow);
             let pencils = Pencils::new(&lines, r, part);
             let mut hidden = Vec::new();
-            blockers.walk(|step| match step {
-                Step::Open(b) => boxes_meet(*b, s.bbox) && !pencils.box_apart(b),
-                Step::Triangle(t) => {
-                    s.hide(g, r, &lines, &pencils, t, &mut hidden);
-                    true
-                }
-            });
+            s.hide_all(g, r, &lines, &pencils, blockers, &mut hidden);
             sort_hidden(&mut hidden);
             s.hidden = hidden;
             out.push(s);

@@ -92,6 +92,7 @@ impl ReceiverMesh {
 
     /// The segments, arrangement and face backprojections from the traces; `reuse` may give
     /// a face's backprojection from before a move (by its interior point and area).
+    #[allow(clippy::too_many_arguments)] // the receiver's parts as a mesh holds them, moved in
     pub fn assemble(
         g: &Geometry,
         light: &LightPlane,

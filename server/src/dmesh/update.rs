@@ -27,7 +27,7 @@
 //! mismatches).
 use super::geometry::{boxes_meet, Geometry};
 use super::grid::Grid;
-use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, Step, TraceVis};
+use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
 use super::segments::Segment;
 use super::eee::{self, EeeSurface};
@@ -335,15 +335,7 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
         let mut u = e.clone();
         u.hidden.retain(|h| !moved_tris.contains(&h.0));
         if boxes_meet(e.bbox, near_new) && !pencils.box_apart(&near_new) {
-            let mut more = Vec::new();
-            moved_runs.walk(|step| match step {
-                Step::Open(b) => boxes_meet(*b, e.bbox) && !pencils.box_apart(b),
-                Step::Triangle(t) => {
-                    e.hide(g, r, &lines, &pencils, t, &mut more);
-                    true
-                }
-            });
-            u.hidden.extend(more);
+            e.hide_all(g, r, &lines, &pencils, &moved_runs, &mut u.hidden);
         }
         sort_hidden(&mut u.hidden);
         out.push(u);
