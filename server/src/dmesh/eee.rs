@@ -160,12 +160,18 @@ impl Lines {
 fn roots(f: impl Fn(f64) -> f64, out: &mut Vec<f64>) {
     let (f0, fh, f1) = (f(0.0), f(0.5), f(1.0));
     let scale = f0.abs().max(fh.abs()).max(f1.abs());
+    let a = 2.0 * (f0 + f1) - 4.0 * fh;
+    quadratic([f0, f1 - f0 - a, a], scale, f, (0.0, 1.0), out);
+}
+
+/// The roots in `(lo, hi)` of `f`, a polynomial of degree ≤ 2 up to rounding with
+/// coefficients `c` (constant first) of size `scale`, polished by two Newton steps on `f`
+/// itself, appended to `out`.
+fn quadratic(c: [f64; 3], scale: f64, f: impl Fn(f64) -> f64, (lo, hi): (f64, f64), out: &mut Vec<f64>) {
     if !scale.is_finite() || scale <= 0.0 {
         return;
     }
-    let a = 2.0 * (f0 + f1) - 4.0 * fh;
-    let b = f1 - f0 - a;
-    let c = f0;
+    let [c, b, a] = c;
     let mut found = [f64::NAN; 2];
     if a.abs() <= 1e-12 * scale {
         if b.abs() > 1e-300 {
@@ -186,7 +192,7 @@ fn roots(f: impl Fn(f64) -> f64, out: &mut Vec<f64>) {
         if !x.is_finite() {
             continue;
         }
-        // Two Newton steps on `f` (the polynomial from three values carries their rounding).
+        // Two Newton steps on `f` (the coefficients carry their rounding).
         for _ in 0..2 {
             let slope = 2.0 * a * x + b;
             if slope.abs() > 1e-300 {
@@ -196,10 +202,23 @@ fn roots(f: impl Fn(f64) -> f64, out: &mut Vec<f64>) {
                 }
             }
         }
-        if x > 0.0 && x < 1.0 {
+        if x > lo && x < hi {
             out.push(x);
         }
     }
+}
+
+/// Whether the line from `y(s)` meets line `f`, as coefficients in `s`: the plane through
+/// `y(s)` and `p q` has the normal `p × q + (q − p) × y(s)`, linear in `s`, and the line's
+/// direction `d(s)` (the two edge planes' normals crossed) is quadratic, so their product is
+/// a cubic whose top term vanishes (left in, to polish the roots on).
+fn meets_line_coefficients(d: &[DVec3; 3], lines: &Lines, (p, q): (DVec3, DVec3)) -> ([f64; 4], f64) {
+    let f0 = p.cross(q) + (q - p).cross(lines.y0);
+    let f1 = (q - p).cross(lines.y1 - lines.y0);
+    let c = [d[0].dot(f0), d[0].dot(f1) + d[1].dot(f0), d[1].dot(f1) + d[2].dot(f0), d[2].dot(f1)];
+    // The size of the terms summed, for the threshold below which a coefficient is zero.
+    let scale = (d[0].length() + d[1].length() + d[2].length()) * (f0.length() + f1.length());
+    (c, scale)
 }
 
 /// The pieces of `(lo, hi)` cut at `cuts` where `keep` holds at the middle, adjacent ones
@@ -313,10 +332,17 @@ pub struct Pencils {
     /// `[end][pencil]`: normal and offset (`n · x = d` on the plane); pencil 2 about the
     /// light edge is all zeros (no test) when a line at an end is missing.
     at: [[(DVec3, f64); 3]; 2],
+    /// The lines' direction `d(s) = d0 + s d1 + s² d2` (the two edge planes' normals, each
+    /// `a × b + (b − a) × y(s)`, crossed).
+    d: [DVec3; 3],
 }
 
 impl Pencils {
     pub fn new(lines: &Lines, r: &Receiver, part: (f64, f64)) -> Pencils {
+        let l = lines.y1 - lines.y0;
+        let normal = |e: &[DVec3; 2]| (e[0].cross(e[1]) + (e[1] - e[0]).cross(lines.y0), (e[1] - e[0]).cross(l));
+        let ((n10, n11), (n20, n21)) = (normal(&lines.e1), normal(&lines.e2));
+        let d = [n10.cross(n20), n10.cross(n21) + n11.cross(n20), n11.cross(n21)];
         let ends = [part.0, part.1].map(|s| (lines.planes(s), lines.ruling(r, s)));
         let about_light = ends.iter().all(|e| e.1.is_some());
         let at = ends.map(|((y, n1, n2), l)| {
@@ -330,7 +356,7 @@ impl Pencils {
             };
             [(n1, n1.dot(y)), (n2, n2.dot(y)), light]
         });
-        Pencils { part, at }
+        Pencils { part, at, d }
     }
 
     /// Whether box `b` lies strictly on one side of a pencil's plane over the whole part (the
@@ -483,18 +509,18 @@ impl EeeSurface {
         }
         let Some((lo, hi)) = pencils.straddled(0, &tri, self.part).and_then(|p| pencils.straddled(1, &tri, p)) else { return };
         let mut cuts = Vec::new();
-        let map = |x: f64| lo + (hi - lo) * x;
-        // The roots over the part (the polynomials rescaled to it).
+        let mut meets = |f: (DVec3, DVec3)| {
+            let (c, scale) = meets_line_coefficients(&pencils.d, lines, f);
+            quadratic([c[0], c[1], c[2]], scale, |s| ((c[3] * s + c[2]) * s + c[1]) * s + c[0], (lo, hi), &mut cuts);
+        };
         for k in 0..3 {
-            let f = (tri[k], tri[(k + 1) % 3]);
-            roots(|x| lines.meets_line(map(x), f), &mut cuts);
+            meets((tri[k], tri[(k + 1) % 3]));
         }
         // A triangle through the receiver's plane: the line's end crosses it there.
         let low: Vec<DVec3> = (0..3).filter_map(|k| crossing_at(r, tri[k], tri[(k + 1) % 3], 0.0)).collect();
         if low.len() == 2 {
-            roots(|x| lines.meets_line(map(x), (low[0], low[1])), &mut cuts);
+            meets((low[0], low[1]));
         }
-        let mut cuts: Vec<f64> = cuts.into_iter().map(map).collect();
         for (h0, h1) in pieces(lo, hi, &mut cuts, |s| ruling_segment(lines, r, s).is_some_and(|(p, q)| pierces(p, q, &tri))) {
             out.push((t, h0, h1));
         }
