@@ -544,7 +544,7 @@ impl EeeSurface {
         let (mut at, end) = self.part;
         let mut emit = |s0: f64, s1: f64| {
             if s1 > s0 {
-                let pts = arc(r, &lines, (s0, s1), 0);
+                let pts = arc(r, &lines, (s0, s1));
                 for w in pts.windows(2) {
                     out.push(Segment { generator: self.generator, a: w[0].1, b: w[1].1 });
                 }
@@ -575,28 +575,27 @@ fn chord_tolerance(r: &Receiver) -> f64 {
 }
 
 /// The trace's polyline over `(s0, s1)`: points on the arc, the chords within the
-/// tolerance of it at their middles (halving at least `min_depth` and up to [`MAX_DEPTH`]
-/// times), points closer than ten tolerances to the last one kept dropped (the last point is
-/// always kept).
-pub fn arc(r: &Receiver, lines: &Lines, (s0, s1): (f64, f64), min_depth: u32) -> Vec<(f64, DVec2)> {
+/// tolerance of it at their middles (halving up to [`MAX_DEPTH`] times; a conic arc has no
+/// inflection, so its middle strays farthest), points closer than ten tolerances to the last
+/// one kept dropped (the last point is always kept).
+pub fn arc(r: &Receiver, lines: &Lines, (s0, s1): (f64, f64)) -> Vec<(f64, DVec2)> {
     let at = |s: f64| lines.ruling(r, s).map(|l| r.to2(l.end));
     let (Some(a), Some(b)) = (at(s0), at(s1)) else { return Vec::new() };
     let eps = chord_tolerance(r);
     let mut out = vec![(s0, a)];
-    let split_to = |depth: u32, off: f64| depth < min_depth || (off > eps && depth < MAX_DEPTH);
-    fn split(at: &dyn Fn(f64) -> Option<DVec2>, more: &dyn Fn(u32, f64) -> bool, (s0, a): (f64, DVec2), (s1, b): (f64, DVec2), depth: u32, out: &mut Vec<(f64, DVec2)>) {
+    fn split(at: &dyn Fn(f64) -> Option<DVec2>, eps: f64, (s0, a): (f64, DVec2), (s1, b): (f64, DVec2), depth: u32, out: &mut Vec<(f64, DVec2)>) {
         let sm = 0.5 * (s0 + s1);
         if let Some(m) = at(sm) {
             let off = (b - a).perp().try_normalize().map_or(m.distance(a), |n| n.dot(m - a).abs());
-            if more(depth, off) {
-                split(at, more, (s0, a), (sm, m), depth + 1, out);
-                split(at, more, (sm, m), (s1, b), depth + 1, out);
+            if off > eps && depth < MAX_DEPTH {
+                split(at, eps, (s0, a), (sm, m), depth + 1, out);
+                split(at, eps, (sm, m), (s1, b), depth + 1, out);
                 return;
             }
         }
         out.push((s1, b));
     }
-    split(&at, &split_to, (s0, a), (s1, b), 0, &mut out);
+    split(&at, eps, (s0, a), (s1, b), 0, &mut out);
     let min = 10.0 * r.tol;
     let mut kept: Vec<(f64, DVec2)> = Vec::with_capacity(out.len());
     for (i, p) in out.iter().enumerate() {
