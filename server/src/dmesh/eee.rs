@@ -28,7 +28,7 @@
 //! arrangement as a polyline whose corners lie on the arc and whose chords stay within
 //! [`CHORD_TOLERANCE`] of the receiver's longest side of it.
 use super::geometry::{boxes_meet, edge_key, union_of, EdgeKey, Geometry};
-use super::receiver::{LightAbove, Receiver};
+use super::receiver::{part_above, LightAbove, Receiver};
 use super::segments::{is_silhouette, sort_hidden, Generator, Runs, Segment, Step};
 use edgepoint_scene::backprojection::{LightPlane, LIGHT_GAP};
 use glam::{DVec2, DVec3};
@@ -44,8 +44,10 @@ const MAX_DEPTH: u32 = 8;
 /// receiver, and the parameter intervals each blocker hides.
 #[derive(Debug, Clone)]
 pub struct EeeSurface {
-    /// [`Generator::Eee`].
-    pub generator: Generator,
+    /// The light edge (its index among the light's edges) and the two blocker edges, the
+    /// smaller key first.
+    pub light_edge: u32,
+    pub edges: (EdgeKey, EdgeKey),
     /// The light edge's part above the receiver: `y(s) = y0 + s (y1 − y0)`.
     pub y0: DVec3,
     pub y1: DVec3,
@@ -242,13 +244,6 @@ fn pieces(lo: f64, hi: f64, cuts: &mut Vec<f64>, mut keep: impl FnMut(f64) -> bo
     out
 }
 
-/// The point where segment `p q` crosses the plane at height `h` over the receiver, if it
-/// does.
-fn crossing_at(r: &Receiver, p: DVec3, q: DVec3, h: f64) -> Option<DVec3> {
-    let (hp, hq) = (r.height(p) - h, r.height(q) - h);
-    ((hp > 0.0) != (hq > 0.0)).then(|| p + (q - p) * (hp / (hp - hq)))
-}
-
 /// The parts of light edge `(y0, y1)` where the EEE surface of candidate edges `c1`, `c2`
 /// exists on receiver `r`: its line meets both edges' segments, below the light and above
 /// the receiver, in front of the light, both edges silhouettes seen from
@@ -270,7 +265,7 @@ pub fn parts(light: &LightPlane, r: &Receiver, lines: &Lines, c1: &Candidate, c2
         for (k, e) in [lines.e1, lines.e2].iter().enumerate() {
             // Where the edge crosses the receiver's plane (there the surface ends on the
             // blocker's contact with the receiver, [`super::segments::contacts`]).
-            if let Some(c) = crossing_at(r, e[0], e[1], 0.0) {
+            if let Some(c) = r.crossing(e[0], e[1], 0.0) {
                 roots(|s| lines.passes(s, c, 1 - k), &mut cuts);
             }
         }
@@ -473,25 +468,23 @@ impl EeeSurface {
         let (a, b) = (shadow.0, shadow.1);
         let ends = [DVec2::new(a.x, a.y), DVec2::new(b.x, a.y), DVec2::new(b.x, b.y), DVec2::new(a.x, b.y)].map(|q| r.to3(q));
         let (lo, hi) = union_of(ends.iter().chain(&[lines.y(part.0), lines.y(part.1)]).map(|p| (*p, *p)));
-        EeeSurface { generator: Generator::Eee { light_edge, edges: (e1, e2) }, y0: lines.y0, y1: lines.y1, part, bbox: (lo - r.tol, hi + r.tol), hidden: Vec::new() }
+        EeeSurface { light_edge, edges: (e1, e2), y0: lines.y0, y1: lines.y1, part, bbox: (lo - r.tol, hi + r.tol), hidden: Vec::new() }
     }
 
-    pub fn edges(&self) -> (EdgeKey, EdgeKey) {
-        match self.generator {
-            Generator::Eee { edges, .. } => edges,
-            _ => unreachable!("an EEE surface has an EEE generator"),
-        }
+    /// Its [`Generator::Eee`].
+    pub fn generator(&self) -> Generator {
+        Generator::Eee { light_edge: self.light_edge, edges: self.edges }
     }
 
     pub fn lines(&self, g: &Geometry) -> Lines {
-        let (e1, e2) = self.edges();
+        let (e1, e2) = self.edges;
         Lines::new(g, (self.y0, self.y1), e1, e2)
     }
 
     /// Appends the intervals of the part that triangle `t` hides (none for the triangles
     /// at either blocker edge, which the lines only graze).
     pub fn hide(&self, g: &Geometry, r: &Receiver, lines: &Lines, pencils: &Pencils, t: u32, out: &mut Vec<(u32, f64, f64)>) {
-        let (e1, e2) = self.edges();
+        let (e1, e2) = self.edges;
         let v = g.tris[t as usize];
         let at = |e: EdgeKey| v.contains(&e.0) && v.contains(&e.1);
         if at(e1) || at(e2) {
@@ -517,9 +510,8 @@ impl EeeSurface {
             meets((tri[k], tri[(k + 1) % 3]));
         }
         // A triangle through the receiver's plane: the line's end crosses it there.
-        let low: Vec<DVec3> = (0..3).filter_map(|k| crossing_at(r, tri[k], tri[(k + 1) % 3], 0.0)).collect();
-        if low.len() == 2 {
-            meets((low[0], low[1]));
+        if let Some([p, q]) = r.plane_crossing(&tri) {
+            meets((p, q));
         }
         for (h0, h1) in pieces(lo, hi, &mut cuts, |s| ruling_segment(lines, r, s).is_some_and(|(p, q)| pierces(p, q, &tri))) {
             out.push((t, h0, h1));
@@ -546,7 +538,7 @@ impl EeeSurface {
             if s1 > s0 {
                 let pts = arc(r, &lines, (s0, s1));
                 for w in pts.windows(2) {
-                    out.push(Segment { generator: self.generator, a: w[0].1, b: w[1].1 });
+                    out.push(Segment { generator: self.generator(), a: w[0].1, b: w[1].1 });
                 }
             }
         };
@@ -666,12 +658,7 @@ pub fn candidates(g: &Geometry, light: &LightPlane, r: &Receiver, (y0, y1): (DVe
         if ha.max(hb) <= r.tol {
             continue;
         }
-        let (a, b) = match (ha > 0.0, hb > 0.0) {
-            (false, false) => continue,
-            (true, true) => (a, b),
-            (true, false) => (a, a + (b - a) * (ha / (ha - hb))),
-            (false, true) => (a + (b - a) * (ha / (ha - hb)), b),
-        };
+        let Some((a, b)) = part_above(a, b, ha, hb) else { continue };
         // Its shadow's box: unbounded (the receiver's own box) when a part reaches the
         // lower light end's height.
         let shadow = if r.height(a) >= top || r.height(b) >= top {
@@ -858,5 +845,5 @@ pub fn receiver_surfaces(g: &Geometry, light: &LightPlane, above: &LightAbove, r
 
 /// Surfaces in one order whatever found them (by generator, then part).
 pub fn canonical_order(s: &mut [EeeSurface]) {
-    s.sort_by(|a, b| a.generator.cmp(&b.generator).then(a.part.0.total_cmp(&b.part.0)));
+    s.sort_by(|a, b| (a.light_edge, a.edges).cmp(&(b.light_edge, b.edges)).then(a.part.0.total_cmp(&b.part.0)));
 }

@@ -85,12 +85,37 @@ impl Receiver {
         (t1 - t0 > 0.0).then_some((t0, t1))
     }
 
+    /// The point where segment `p q` crosses the plane at height `h` over the receiver, if
+    /// it does.
+    pub fn crossing(&self, p: DVec3, q: DVec3, h: f64) -> Option<DVec3> {
+        let (hp, hq) = (self.height(p) - h, self.height(q) - h);
+        ((hp > 0.0) != (hq > 0.0)).then(|| p + (q - p) * (hp / (hp - hq)))
+    }
+
+    /// The two points where triangle `tri` passes through the receiver's plane, if it does
+    /// (the sides' sign changes come in pairs).
+    pub fn plane_crossing(&self, tri: &[DVec3; 3]) -> Option<[DVec3; 2]> {
+        let mut q = (0..3).filter_map(|k| self.crossing(tri[k], tri[(k + 1) % 3], 0.0));
+        Some([q.next()?, q.next()?])
+    }
+
     /// Whether `q` lies inside the triangle (closed).
     pub fn contains(&self, q: DVec2) -> bool {
         (0..3).all(|k| {
             let (p, r) = (self.corners[k], self.corners[(k + 1) % 3]);
             (r - p).perp_dot(q - p) >= -self.tol * (r - p).length()
         })
+    }
+}
+
+/// The part of segment `a b` where an affine function with values `ha`, `hb` at its ends
+/// is positive.
+pub fn part_above(a: DVec3, b: DVec3, ha: f64, hb: f64) -> Option<(DVec3, DVec3)> {
+    match (ha > 0.0, hb > 0.0) {
+        (true, true) => Some((a, b)),
+        (false, false) => None,
+        (true, false) => Some((a, a + (b - a) * (ha / (ha - hb)))),
+        (false, true) => Some((a + (b - a) * (ha / (ha - hb)), b)),
     }
 }
 
@@ -116,13 +141,7 @@ impl LightAbove {
         let edges = (0..k)
             .map(|i| {
                 let j = (i + 1) % k;
-                let (a, b, ha, hb) = (corners[i], corners[j], h[i] - r.tol, h[j] - r.tol);
-                match (ha > 0.0, hb > 0.0) {
-                    (true, true) => Some((a, b)),
-                    (false, false) => None,
-                    (true, false) => Some((a, a + (b - a) * (ha / (ha - hb)))),
-                    (false, true) => Some((a + (b - a) * (ha / (ha - hb)), b)),
-                }
+                part_above(corners[i], corners[j], h[i] - r.tol, h[j] - r.tol)
             })
             .collect();
         let clipped = edgepoint_scene::polyclip::clip(&corners, |p| r.height(p) - r.tol);

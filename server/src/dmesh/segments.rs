@@ -342,18 +342,7 @@ pub fn contacts(g: &Geometry, r: &Receiver, blockers: &[u32], out: &mut Vec<Segm
         if !(h.iter().any(|x| *x > r.tol) && h.iter().any(|x| *x < -r.tol)) {
             continue;
         }
-        let mut q = [DVec2::ZERO; 2];
-        let mut n = 0;
-        for k in 0..3 {
-            let j = (k + 1) % 3;
-            if (h[k] > 0.0) != (h[j] > 0.0) && n < 2 {
-                q[n] = r.to2(tri[k] + (tri[j] - tri[k]) * (h[k] / (h[k] - h[j])));
-                n += 1;
-            }
-        }
-        if n < 2 {
-            continue;
-        }
+        let Some(q) = r.plane_crossing(&tri).map(|c| c.map(|p| r.to2(p))) else { continue };
         let Some((s0, s1)) = r.clip_segment(q[0], q[1]) else { continue };
         let (a, b) = (q[0].lerp(q[1], s0), q[0].lerp(q[1], s1));
         if a.distance(b) > r.tol {

@@ -367,7 +367,7 @@ fn eee_surfaces_equal_a_brute_force_enumeration() {
                             continue;
                         }
                         let gen = Generator::Eee { light_edge: li as u32, edges: (e1, e2) };
-                        let mine: Vec<&eee::EeeSurface> = m.eee.iter().filter(|s| s.generator == gen).collect();
+                        let mine: Vec<&eee::EeeSurface> = m.eee.iter().filter(|s| s.generator() == gen).collect();
                         let ends: Vec<f64> = mine.iter().flat_map(|s| [s.part.0, s.part.1].into_iter().chain(s.hidden.iter().flat_map(|h| [h.1, h.2]))).collect();
                         let claims = |s: f64| mine.iter().any(|m| s > m.part.0 && s < m.part.1 && !m.hidden.iter().any(|h| s > h.1 && s < h.2));
                         let (a1, b1, a2, b2) = (g.pos[e1.0 as usize], g.pos[e1.1 as usize], g.pos[e2.0 as usize], g.pos[e2.1 as usize]);

@@ -246,7 +246,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     super::segments::canonical_order(&mut out);
     s.recast_ns += ns(t0);
     let t0 = Instant::now();
-    let eee = update_eee(m, g, light, &above, &blockers, &new_moved, (&moved, &verts), motion, near_new, s);
+    let eee = update_eee(m, g, light, &above, &blockers, (&new_moved, &moved_runs), (&moved, &verts), motion, near_new, s);
     s.eee_ns += ns(t0);
     let t0 = Instant::now();
     // The arrangement is a function of the receiver's corners and its segments: when 1D
@@ -314,28 +314,30 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
 /// found again from the pairs of the moved object's candidate edges with each other and with
 /// the static ones, and intersected with every blocker.
 #[allow(clippy::too_many_arguments)] // the receiver before, the move and the stats, as `update_receiver` has them
-fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], new_moved: &[u32], (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
+fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], (new_moved, moved_runs): (&[u32], &Runs), (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
     let r = &m.receiver;
-    let moved_runs = Runs::new(g, new_moved, false);
     let mut out = Vec::with_capacity(m.eee.len());
     for e in &m.eee {
-        if verts.clone().any(|v| e.generator.uses_vertex(v)) {
+        if verts.clone().any(|v| e.generator().uses_vertex(v)) {
             continue;
         }
         // A surface whose box misses the motion volume, or whose lines pass it by on one
         // side of an edge's planes over the whole part, meets the moved object neither before
         // nor after.
-        let lines = e.lines(g);
-        let pencils = eee::Pencils::new(&lines, r, e.part);
-        if !boxes_meet(e.bbox, motion) || pencils.box_apart(&motion) {
+        // (The box first: the pencils are made only for a surface it does not settle.)
+        let near = boxes_meet(e.bbox, motion).then(|| {
+            let lines = e.lines(g);
+            (lines, eee::Pencils::new(&lines, r, e.part))
+        });
+        let Some((lines, pencils)) = near.filter(|(_, p)| !p.box_apart(&motion)) else {
             out.push(e.clone());
             s.eee_untouched += 1;
             continue;
-        }
+        };
         let mut u = e.clone();
         u.hidden.retain(|h| !moved_tris.contains(&h.0));
         if boxes_meet(e.bbox, near_new) && !pencils.box_apart(&near_new) {
-            e.hide_all(g, r, &lines, &pencils, &moved_runs, &mut u.hidden);
+            e.hide_all(g, r, &lines, &pencils, moved_runs, &mut u.hidden);
         }
         sort_hidden(&mut u.hidden);
         out.push(u);
