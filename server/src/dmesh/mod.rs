@@ -211,11 +211,18 @@ pub struct DiscontinuityMesh {
 
 /// The area lights of a scene as light planes (point and spot lights have no mesh).
 pub fn area_lights(scene: &edgepoint_scene::Scene) -> Vec<LightPlane> {
+    area_lights_indexed(scene).into_iter().map(|(_, l)| l).collect()
+}
+
+/// [`area_lights`], each with its index among the scene's lights (a light with no plane,
+/// all its corners on a line, is left out of both).
+pub fn area_lights_indexed(scene: &edgepoint_scene::Scene) -> Vec<(u32, LightPlane)> {
     scene
         .lights
         .iter()
-        .filter_map(|l| match l {
-            edgepoint_scene::Light::Area { vertices, .. } => LightPlane::new(vertices),
+        .enumerate()
+        .filter_map(|(i, l)| match l {
+            edgepoint_scene::Light::Area { vertices, .. } => LightPlane::new(vertices).map(|p| (i as u32, p)),
             _ => None,
         })
         .collect()

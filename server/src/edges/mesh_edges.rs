@@ -70,8 +70,19 @@ pub fn lighting_at(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, q: DVec2,
 /// size each): far above the arrangement's snapping, far below any feature the EPI draws.
 pub const SIDE_OFFSET_TOLERANCES: f64 = 1000.0;
 
-/// A shadow edge with its penumbra at its ends (world vectors across it).
-pub type EdgeWithPenumbra = (EdgeSegment, [Vec3; 2]);
+/// A shadow edge of the mesh with its penumbra at its ends (world vectors across it), and
+/// what paper 003's estimate of it needs ([`crate::edges::simplify`]): its light and the
+/// blocker segment whose shadow it bounds.
+#[derive(Debug, Clone, Copy)]
+pub struct MeshShadowEdge {
+    pub edge: EdgeSegment,
+    pub penumbra: [Vec3; 2],
+    /// The light's index in the mesh's lights.
+    pub light: u32,
+    /// The blocker segment of the edge's generator (world; a vertex as a segment of no
+    /// length, a contact the edge itself).
+    pub blocker: (DVec3, DVec3),
+}
 
 /// How many mesh edges went which way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -118,16 +129,16 @@ fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3,
 /// (world vectors across it; zero for a hard edge), in the order lights × receivers × mesh
 /// edges.
 /// Receivers in parallel (on the caller's pool), the result in that order whatever the split.
-pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<EdgeWithPenumbra>) -> MeshEdgeCounts {
+pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<MeshShadowEdge>) -> MeshEdgeCounts {
     let mut counts = MeshEdgeCounts::default();
     for (l, light) in mesh.lights.iter().enumerate() {
         let dc = diameter_and_centre(light);
         let receivers: Vec<&ReceiverMesh> = mesh.meshes[l].iter().flatten().map(|m| &**m).collect();
-        let parts: Vec<(MeshEdgeCounts, Vec<EdgeWithPenumbra>)> = receivers
+        let parts: Vec<(MeshEdgeCounts, Vec<MeshShadowEdge>)> = receivers
             .par_iter()
             .map(|m| {
                 let (mut c, mut v) = (MeshEdgeCounts::default(), Vec::new());
-                receiver_edges(m, g, light, dc, &mut c, &mut v);
+                receiver_edges(m, g, (l as u32, light), dc, &mut c, &mut v);
                 (c, v)
             })
             .collect();
@@ -153,7 +164,7 @@ impl std::ops::Add for MeshEdgeCounts {
 }
 
 /// [`mesh_shadow_edges`] of one receiver mesh.
-fn receiver_edges(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, (diameter, centre): (f64, DVec3), counts: &mut MeshEdgeCounts, out: &mut Vec<EdgeWithPenumbra>) {
+fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane), (diameter, centre): (f64, DVec3), counts: &mut MeshEdgeCounts, out: &mut Vec<MeshShadowEdge>) {
     if m.umbra || m.segments.is_empty() {
         return;
     }
@@ -198,7 +209,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, (diameter,
             // Both sides see the same whole light or none of it: nothing changes across.
             _ => continue,
         };
-        out.push((EdgeSegment { a: p0.as_vec3(), b: p1.as_vec3(), kind, object }, penumbra));
+        out.push(MeshShadowEdge { edge: EdgeSegment { a: p0.as_vec3(), b: p1.as_vec3(), kind, object }, penumbra, light: li, blocker: (s0, s1) });
     }
 }
 

@@ -233,11 +233,12 @@ pub fn chosen_shadow_edges<T: Copy>(errors: &[(T, f64)], tolerance: f64, out: &m
     errors.len() - (out.len() - before)
 }
 
-/// The finder's shadow edges with the area lights' replaced by the mesh's: point lights'
-/// hard edges stay.
-fn with_mesh_edges(segments: &mut Vec<(EdgeSegment, [Vec3; 2])>, mesh: &[(EdgeSegment, [Vec3; 2])]) {
+/// The finder's shadow edges with the area lights' replaced by the mesh's (those the
+/// mesh's estimates leave out at `tolerance` left out): point lights' hard edges stay.
+/// Returns how many of the mesh's were left out.
+fn with_mesh_edges(segments: &mut Vec<(EdgeSegment, [Vec3; 2])>, mesh: &MeshShadows, tolerance: f64) -> usize {
     segments.retain(|(e, _)| !matches!(e.kind, EdgeKind::ShadowUmbral | EdgeKind::ShadowPenumbral));
-    segments.extend_from_slice(mesh);
+    mesh.published(tolerance, segments)
 }
 
 /// Between the frame loop and the shadow thread: the newest job (an older one not yet
@@ -292,15 +293,16 @@ impl ShadowThread {
                 // Before that, the finder's area-light edges show meanwhile.
                 let meshing = job.mesh && matches!(mesh, Some(Ok(_)));
                 let triples: Vec<TripleKey> = if meshing { job.triples.into_iter().filter(|k| !area_light.get(k.light as usize).copied().unwrap_or(false)).collect() } else { job.triples };
-                // The finder's edges last published, for the mesh's to join below.
-                let (mut finder_edges, mut finder_simplified) = (Vec::new(), 0);
+                // The finder's edges last published, with how many it left out and at what
+                // tolerance, for the mesh's to join below.
+                let (mut finder_edges, mut finder_simplified, mut finder_tolerance) = (Vec::new(), 0, 0.0);
                 let mut publish = |mut result: ShadowResult, ms: f64| {
                     if job.mesh {
                         finder_edges.clone_from(&result.segments);
-                        finder_simplified = result.simplified;
+                        (finder_simplified, finder_tolerance) = (result.simplified, result.tolerance);
                     }
                     if let (true, Some(Ok(m))) = (meshing, &mesh) {
-                        with_mesh_edges(&mut result.segments, &m.edges);
+                        result.simplified += with_mesh_edges(&mut result.segments, m, result.tolerance);
                     }
                     publish_now(result, ms);
                 };
@@ -330,6 +332,12 @@ impl ShadowThread {
                     let segments = crate::background::pool().install(|| finder.with_penumbrae());
                     publish(ShadowResult { segments, stats, simplified: 0, tolerance }, ms);
                 }
+                // The finder's last publication with the mesh's edges at `tolerance`.
+                let with_mesh = |m: &MeshShadows, tolerance: f64| {
+                    let mut segments = finder_edges.clone();
+                    let simplified = finder_simplified + with_mesh_edges(&mut segments, m, tolerance);
+                    ShadowResult { segments, stats, simplified, tolerance }
+                };
                 if job.mesh && !matches!(&mesh, Some(Err(()))) && !matches!(&mesh, Some(Ok(m)) if m.at(&job.transforms)) {
                     // Built or brought to the job's transforms, then published again.
                     let t = Instant::now();
@@ -340,9 +348,19 @@ impl ShadowThread {
                         _ => mesh = Some(MeshShadows::build(&scene, &job.transforms).ok_or(())),
                     });
                     if let Some(Ok(m)) = &mesh {
-                        let mut segments = finder_edges;
-                        with_mesh_edges(&mut segments, &m.edges);
-                        publish_now(ShadowResult { segments, stats, simplified: finder_simplified, tolerance }, t.elapsed().as_secs_f64() * 1e3);
+                        publish_now(with_mesh(m, finder_tolerance), t.elapsed().as_secs_f64() * 1e3);
+                    }
+                }
+                // Paper 003 on the mesh's edges: estimated once per state of the mesh (every
+                // edge went out above meanwhile), then only those at or above the tolerance.
+                if let (true, true, Some(Ok(m))) = (job.mesh, tolerance > 0.0, &mut mesh) {
+                    if m.estimates_missing() {
+                        let t = Instant::now();
+                        let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0));
+                        let result = with_mesh(m, finder_tolerance);
+                        let ms = t.elapsed().as_secs_f64() * 1e3;
+                        tracing::debug!(estimated, left_out = result.simplified - finder_simplified, ms, "mesh shadow edges simplified (paper 003)");
+                        publish_now(result, ms);
                     }
                 }
             })
@@ -500,28 +518,48 @@ mod tests {
         let none: HashMap<TripleKey, ()> = HashMap::new();
         let shadows = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| !s.kind.is_geometric()).collect::<Vec<_>>());
         let mut direct = MeshShadows::build(&scene, &t).expect("cornell has an area light");
-        let want = shadows(&direct.edges.iter().map(|e| e.0).collect::<Vec<_>>());
+        let published = |m: &MeshShadows, tolerance: f64| {
+            let mut v = Vec::new();
+            let left_out = m.published(tolerance, &mut v);
+            (shadows(&v.iter().map(|e| e.0).collect::<Vec<_>>()), left_out)
+        };
+        let (want, _) = published(&direct, 0.0);
         assert!(!want.is_empty());
-        let until = |edges: &mut SessionEdges, t: &[Affine3A], want: &[(u32, EdgeKind, [i64; 6])]| {
+        let until = |edges: &mut SessionEdges, t: &[Affine3A], tolerance: f64, want: &[(u32, EdgeKind, [i64; 6])], left_out: usize| {
             let deadline = Instant::now() + Duration::from_secs(60);
             let mut out = Vec::new();
             loop {
-                edges.find(t, scene.camera.eye, &view(&scene), &none, 85.0, 0.0, true, None, &mut out);
-                if shadows(&out) == want {
+                let st = edges.find(t, scene.camera.eye, &view(&scene), &none, 85.0, tolerance, true, None, &mut out);
+                if shadows(&out) == want && st.shadow_simplified == left_out {
                     return;
                 }
                 assert!(Instant::now() < deadline, "mesh edges did not arrive: {} of {}", shadows(&out).len(), want.len());
                 std::thread::sleep(Duration::from_millis(5));
             }
         };
-        until(&mut edges, &t, &want);
+        until(&mut edges, &t, 0.0, &want, 0);
         let mut moved = t.clone();
         let short = scene.object_id("shortbox").unwrap() as usize;
         moved[short] = Affine3A::from_translation(Vec3::new(0.04, 0.0, -0.03)) * t[short];
         assert!(direct.sync(&moved));
-        let want_moved = shadows(&direct.edges.iter().map(|e| e.0).collect::<Vec<_>>());
+        let (want_moved, _) = published(&direct, 0.0);
         assert_ne!(want_moved, want, "the short box's shadow moved");
-        until(&mut edges, &moved, &want_moved);
+        until(&mut edges, &moved, 0.0, &want_moved, 0);
+
+        // Simplification (paper 003) on the mesh's edges: the session publishes those whose
+        // estimate is at or above the tolerance, as the mesh estimated directly says. With
+        // cornell's one light an absurd tolerance (10: more than the whole light) leaves out
+        // most; back at 0 every edge is there again.
+        let mut finder = ShadowFinder::new(Arc::new(SceneEdgeIndex::build(&scene, &NoProgress)));
+        finder.set_transforms(&moved);
+        assert!(direct.estimates_missing());
+        assert_eq!(direct.estimate(&finder.scene_lights().0), want_moved.len());
+        assert!(!direct.estimates_missing());
+        let (few, left_out) = published(&direct, 10.0);
+        assert_eq!(few.len() + left_out, want_moved.len());
+        assert!(left_out > want_moved.len() / 2, "{left_out} of {} left out", want_moved.len());
+        until(&mut edges, &moved, 10.0, &few, left_out);
+        until(&mut edges, &moved, 0.0, &want_moved, 0);
     }
 
     /// Tolerance 0 is off: every edge goes to the EPI, whatever its estimate (even 0).

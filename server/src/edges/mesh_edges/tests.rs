@@ -153,7 +153,7 @@ fn cornell_gives_penumbral_and_umbral_edges_on_its_receivers() {
     let c = mesh_shadow_edges(&mesh, &g, &mut out);
     assert_eq!(out.len(), c.penumbral + c.umbral + c.hard + c.interior_steep);
     assert!(c.penumbral > 0 && c.umbral > 0, "{c:?}");
-    for (e, p) in &out {
+    for MeshShadowEdge { edge: e, penumbra: p, .. } in &out {
         // On a receiver's object, with a penumbra across (not along) it.
         assert!(g.object.contains(&e.object), "{e:?}: not on an object");
         let d = (e.b - e.a).normalize_or_zero();
@@ -164,7 +164,7 @@ fn cornell_gives_penumbral_and_umbral_edges_on_its_receivers() {
     }
     // The boxes' shadows on the floor are bounded on both sides.
     let floor = scene.object_id("floor").unwrap();
-    let on_floor = |k: EdgeKind| out.iter().filter(|(e, _)| e.object == floor && e.kind == k).count();
+    let on_floor = |k: EdgeKind| out.iter().filter(|m| m.edge.object == floor && m.edge.kind == k).count();
     assert!(on_floor(EdgeKind::ShadowPenumbral) > 0 && on_floor(EdgeKind::ShadowUmbral) > 0);
 }
 
