@@ -160,9 +160,11 @@ impl DiscontinuityMesh {
 }
 
 /// The receiver's mesh after object `o` moved (`g` the new geometry), or `None` when the
-/// object is not among its blockers before or after (nothing changes).
+/// object is not among its blockers before or after (nothing changes). What it keeps (the
+/// untouched surfaces, faces, a kept arrangement) it takes out of `m`, which is to be
+/// replaced by the result: moved, not copied and dropped.
 #[allow(clippy::too_many_arguments)] // the move (object, motion volume, new box, silhouettes) and the stats it adds to
-fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), silhouettes: &Silhouettes, s: &mut UpdateStats) -> Option<ReceiverMesh> {
+fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), silhouettes: &Silhouettes, s: &mut UpdateStats) -> Option<ReceiverMesh> {
     let t0 = Instant::now();
     let moved = g.object_tris(o);
     let verts = g.object_vertices(o);
@@ -195,7 +197,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // occluder, the first of the blockers that covers: the same mesh.)
     if m.umbra && !m.faces.iter().any(|f| f.occluders.iter().any(|t| moved.contains(t))) {
         s.receivers_kept_in_umbra += 1;
-        return Some(ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), eee: Vec::new(), segments: Vec::new(), arrangement: m.arrangement.clone(), faces: m.faces.clone(), umbra: true });
+        return Some(ReceiverMesh { receiver, shaft, blockers, traces: Vec::new(), eee: Vec::new(), segments: Vec::new(), arrangement: std::mem::take(&mut m.arrangement), faces: std::mem::take(&mut m.faces), umbra: true });
     }
     // In umbra before behind the object, or in umbra after: decided and built afresh.
     if m.umbra || umbra::covering_occluder(g, &above.clipped, &g.tri(receiver.tri), &blockers, receiver.tol).is_some() {
@@ -211,7 +213,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let moved_runs = Runs::for_traces(g, &new_moved, m.traces.len());
     let near_new = pad(new_box, m.receiver.tol);
     let mut out: Vec<TraceVis> = Vec::with_capacity(m.traces.len());
-    for tv in &m.traces {
+    for tv in std::mem::take(&mut m.traces) {
         if verts.clone().any(|v| tv.trace.generator.uses_vertex(v)) {
             continue;
         }
@@ -219,7 +221,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         // object neither before nor after: its intersection list stays as it is.
         let fan = fan_box(&receiver, &tv.trace);
         if !boxes_meet(fan, motion) {
-            out.push(tv.clone());
+            out.push(tv);
             s.traces_untouched += 1;
             continue;
         }
@@ -246,7 +248,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     super::segments::canonical_order(&mut out);
     s.recast_ns += ns(t0);
     let t0 = Instant::now();
-    let eee = update_eee(m, g, light, &above, &blockers, (&new_moved, &moved_runs), (&moved, &verts), motion, near_new, s);
+    let eee = update_eee(&m.receiver, std::mem::take(&mut m.eee), g, light, &above, &blockers, (&new_moved, &moved_runs), (&moved, &verts), motion, near_new, s);
     s.eee_ns += ns(t0);
     let t0 = Instant::now();
     // The arrangement is a function of the receiver's corners and its segments: when 1D
@@ -256,7 +258,7 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     let segments = visible_segments(g, &receiver, &blockers, &out, &eee);
     let arrangement = if same_segments(&segments, &m.segments) {
         s.arrangements_kept += 1;
-        m.arrangement.clone()
+        std::mem::take(&mut m.arrangement)
     } else {
         arrangement::build(&receiver.corners, &segments, receiver.tol)
     };
@@ -267,7 +269,8 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
     // By interior point alone: a backprojection is a function of the point (and the
     // blockers), not of the face's shape; the face's area, summed from wherever its cycle
     // starts, can differ in its last bits between two arrangements of the same face.
-    let old: HashMap<(u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits()), i)).collect();
+    let mut old_faces = std::mem::take(&mut m.faces);
+    let old: HashMap<(u64, u64), usize> = old_faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits()), i)).collect();
     let (mut kept, mut redone) = (0, 0);
     let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut |point, _area2| {
         // The moved object hid none of the light from there before (no triangle of it among
@@ -286,13 +289,14 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
         // box but not under it: 3,081 of a `rooms` chair's 4,752 faces were redone by the
         // box test alone.)
         let reuse = old.get(&(point.x.to_bits(), point.y.to_bits())).and_then(|i| {
-            let f = &m.faces[*i];
+            let f = &mut old_faces[*i];
             if f.occluders.iter().any(|t| moved.contains(t)) {
                 return None;
             }
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
-            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| f.clone())
+            // (Each old face has its own interior point: taken at most once.)
+            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| std::mem::take(f))
         });
         if reuse.is_some() {
             kept += 1;
@@ -314,10 +318,9 @@ fn update_receiver(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, m
 /// found again from the pairs of the moved object's candidate edges with each other and with
 /// the static ones, and intersected with every blocker.
 #[allow(clippy::too_many_arguments)] // the receiver before, the move and the stats, as `update_receiver` has them
-fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], (new_moved, moved_runs): (&[u32], &Runs), (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
-    let r = &m.receiver;
-    let mut out = Vec::with_capacity(m.eee.len());
-    for e in &m.eee {
+fn update_eee(r: &super::receiver::Receiver, old: Vec<EeeSurface>, g: &Geometry, light: &LightPlane, above: &LightAbove, blockers: &[u32], (new_moved, moved_runs): (&[u32], &Runs), (moved_tris, verts): (&std::ops::Range<u32>, &std::ops::Range<u32>), motion: (DVec3, DVec3), near_new: (DVec3, DVec3), s: &mut UpdateStats) -> Vec<EeeSurface> {
+    let mut out = Vec::with_capacity(old.len());
+    for e in old {
         if verts.clone().any(|v| e.generator().uses_vertex(v)) {
             continue;
         }
@@ -330,14 +333,16 @@ fn update_eee(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, above: &LightA
             (lines, eee::Pencils::new(&lines, r, e.part))
         });
         let Some((lines, pencils)) = near.filter(|(_, p)| !p.box_apart(&motion)) else {
-            out.push(e.clone());
+            out.push(e);
             s.eee_untouched += 1;
             continue;
         };
-        let mut u = e.clone();
+        let mut u = e;
         u.hidden.retain(|h| !moved_tris.contains(&h.0));
-        if boxes_meet(e.bbox, near_new) && !pencils.box_apart(&near_new) {
-            e.hide_all(g, r, &lines, &pencils, moved_runs, &mut u.hidden);
+        if boxes_meet(u.bbox, near_new) && !pencils.box_apart(&near_new) {
+            let mut hidden = std::mem::take(&mut u.hidden);
+            u.hide_all(g, r, &lines, &pencils, moved_runs, &mut hidden);
+            u.hidden = hidden;
         }
         sort_hidden(&mut u.hidden);
         out.push(u);
