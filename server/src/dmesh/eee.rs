@@ -224,24 +224,39 @@ fn meets_line_coefficients(d: &[DVec3; 3], lines: &Lines, (p, q): (DVec3, DVec3)
 }
 
 /// The pieces of `(lo, hi)` cut at `cuts` where `keep` holds at the middle, adjacent ones
-/// merged.
-fn pieces(lo: f64, hi: f64, cuts: &mut Vec<f64>, mut keep: impl FnMut(f64) -> bool) -> Vec<(f64, f64)> {
+/// merged, appended to `out`.
+fn pieces(lo: f64, hi: f64, cuts: &mut Vec<f64>, keep: impl FnMut(f64) -> bool) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    each_piece(lo, hi, cuts, keep, |a, b| out.push((a, b)));
+    out
+}
+
+/// [`pieces`] handed to `emit` one by one, in order (no list made: the per-triangle tests
+/// run it a million times a move).
+fn each_piece(lo: f64, hi: f64, cuts: &mut Vec<f64>, mut keep: impl FnMut(f64) -> bool, mut emit: impl FnMut(f64, f64)) {
     cuts.retain(|c| *c > lo && *c < hi);
     cuts.push(lo);
     cuts.push(hi);
     cuts.sort_by(f64::total_cmp);
     cuts.dedup();
-    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut run: Option<(f64, f64)> = None;
     for w in cuts.windows(2) {
         if w[1] - w[0] <= 1e-13 || !keep(0.5 * (w[0] + w[1])) {
             continue;
         }
-        match out.last_mut() {
+        match &mut run {
             Some(last) if last.1 == w[0] => last.1 = w[1],
-            _ => out.push((w[0], w[1])),
+            _ => {
+                if let Some((a, b)) = run {
+                    emit(a, b);
+                }
+                run = Some((w[0], w[1]));
+            }
         }
     }
-    out
+    if let Some((a, b)) = run {
+        emit(a, b);
+    }
 }
 
 /// The parts of light edge `(y0, y1)` where the EEE surface of candidate edges `c1`, `c2`
@@ -483,7 +498,9 @@ impl EeeSurface {
 
     /// Appends the intervals of the part that triangle `t` hides (none for the triangles
     /// at either blocker edge, which the lines only graze).
-    pub fn hide(&self, g: &Geometry, r: &Receiver, lines: &Lines, pencils: &Pencils, t: u32, out: &mut Vec<(u32, f64, f64)>) {
+    /// (`cuts` is scratch.)
+    #[allow(clippy::too_many_arguments)] // the surface's lines and pencils made once for every triangle, and a scratch list
+    pub fn hide(&self, g: &Geometry, r: &Receiver, lines: &Lines, pencils: &Pencils, t: u32, cuts: &mut Vec<f64>, out: &mut Vec<(u32, f64, f64)>) {
         let (e1, e2) = self.edges;
         let v = g.tris[t as usize];
         let at = |e: EdgeKey| v.contains(&e.0) && v.contains(&e.1);
@@ -501,10 +518,10 @@ impl EeeSurface {
             return;
         }
         let Some((lo, hi)) = pencils.straddled(0, &tri, self.part).and_then(|p| pencils.straddled(1, &tri, p)) else { return };
-        let mut cuts = Vec::new();
+        cuts.clear();
         let mut meets = |f: (DVec3, DVec3)| {
             let (c, scale) = meets_line_coefficients(&pencils.d, lines, f);
-            quadratic([c[0], c[1], c[2]], scale, |s| ((c[3] * s + c[2]) * s + c[1]) * s + c[0], (lo, hi), &mut cuts);
+            quadratic([c[0], c[1], c[2]], scale, |s| ((c[3] * s + c[2]) * s + c[1]) * s + c[0], (lo, hi), cuts);
         };
         for k in 0..3 {
             meets((tri[k], tri[(k + 1) % 3]));
@@ -513,18 +530,17 @@ impl EeeSurface {
         if let Some([p, q]) = r.plane_crossing(&tri) {
             meets((p, q));
         }
-        for (h0, h1) in pieces(lo, hi, &mut cuts, |s| ruling_segment(lines, r, s).is_some_and(|(p, q)| pierces(p, q, &tri))) {
-            out.push((t, h0, h1));
-        }
+        each_piece(lo, hi, cuts, |s| ruling_segment(lines, r, s).is_some_and(|(p, q)| pierces(p, q, &tri)), |h0, h1| out.push((t, h0, h1)));
     }
 
     /// [`EeeSurface::hide`] for the triangles of `runs`, a run or a group of runs passed over
     /// when its box misses the surface's or lies apart from a pencil.
     pub fn hide_all(&self, g: &Geometry, r: &Receiver, lines: &Lines, pencils: &Pencils, runs: &Runs, out: &mut Vec<(u32, f64, f64)>) {
+        let mut cuts = Vec::new();
         runs.walk(|step| match step {
             Step::Open(b) => boxes_meet(*b, self.bbox) && !pencils.box_apart(b),
             Step::Triangle(t) => {
-                self.hide(g, r, lines, pencils, t, out);
+                self.hide(g, r, lines, pencils, t, &mut cuts, out);
                 true
             }
         });

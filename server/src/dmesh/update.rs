@@ -25,7 +25,7 @@
 //!
 //! The result equals a full recomputation (tested on random moves; the benchmark counts
 //! mismatches).
-use super::geometry::{boxes_meet, Geometry};
+use super::geometry::{boxes_meet, union_of, Geometry};
 use super::grid::Grid;
 use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
@@ -352,7 +352,7 @@ fn update_eee(r: &super::receiver::Receiver, old: Vec<EeeSurface>, g: &Geometry,
         let moved_edges = eee::edges_of(g, new_moved);
         let mut runs = None;
         let (mut first, mut rest) = (Vec::new(), Vec::new());
-        let mut static_edges = None;
+        let mut others = None;
         for (li, e) in above.edges.iter().enumerate() {
             let Some(e) = *e else { continue };
             first.clear();
@@ -360,15 +360,20 @@ fn update_eee(r: &super::receiver::Receiver, old: Vec<EeeSurface>, g: &Geometry,
             if first.is_empty() {
                 continue;
             }
-            let static_edges = static_edges.get_or_insert_with(|| {
-                let others: Vec<u32> = blockers.iter().copied().filter(|t| !moved_tris.contains(t)).collect();
-                eee::edges_of(g, &others)
-            });
+            let others: &Vec<u32> = others.get_or_insert_with(|| blockers.iter().copied().filter(|t| !moved_tris.contains(t)).collect());
             rest.clear();
-            // Only static edges whose shadow meets a moved edge's can pair with one.
+            // Only static edges whose shadow meets a moved edge's can pair with one: a line
+            // of a surface lands in the moved edge's shadow, inside box `near`, so its point
+            // on the static edge lies between the light edge and that box — in the box
+            // around both, which the edge's triangles meet. (The receiver's other blockers,
+            // thousands under a table, are passed over by their boxes.)
             let near = first.iter().fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), c| (lo.min(c.shadow.0), hi.max(c.shadow.1)));
             let near = (near.0 - r.tol, near.1 + r.tol);
-            eee::candidates(g, light, r, e, static_edges, Some(near), &mut rest);
+            let hull = union_of([e.0, e.1, r.to3(near.0), r.to3(near.1), r.to3(DVec2::new(near.0.x, near.1.y)), r.to3(DVec2::new(near.1.x, near.0.y))].into_iter().map(|p| (p, p)));
+            let hull = pad(hull, r.tol);
+            let near_tris: Vec<u32> = others.iter().copied().filter(|t| boxes_meet(g.tri_bounds(*t), hull)).collect();
+            let static_edges = eee::edges_of(g, &near_tris);
+            eee::candidates(g, light, r, e, &static_edges, Some(near), &mut rest);
             let runs = runs.get_or_insert_with(|| Runs::for_traces(g, blockers, first.len() + rest.len()));
             let before = out.len();
             eee::surfaces(g, light, r, li as u32, e, &rest, Some(&first), runs, &mut out);
