@@ -161,8 +161,8 @@ impl DiscontinuityMesh {
 
 /// The receiver's mesh after object `o` moved (`g` the new geometry), or `None` when the
 /// object is not among its blockers before or after (nothing changes). What it keeps (the
-/// untouched surfaces, faces, a kept arrangement) it takes out of `m`, which is to be
-/// replaced by the result: moved, not copied and dropped.
+/// untouched surfaces, a kept arrangement) it takes out of `m`, which is to be replaced by
+/// the result: moved, not copied and dropped.
 #[allow(clippy::too_many_arguments)] // the move (object, motion volume, new box, silhouettes) and the stats it adds to
 fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), silhouettes: &Silhouettes, s: &mut UpdateStats) -> Option<ReceiverMesh> {
     let t0 = Instant::now();
@@ -269,8 +269,7 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
     // By interior point alone: a backprojection is a function of the point (and the
     // blockers), not of the face's shape; the face's area, summed from wherever its cycle
     // starts, can differ in its last bits between two arrangements of the same face.
-    let mut old_faces = std::mem::take(&mut m.faces);
-    let old: HashMap<(u64, u64), usize> = old_faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits()), i)).collect();
+    let old: HashMap<(u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits()), i)).collect();
     let (mut kept, mut redone) = (0, 0);
     let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut |point, _area2| {
         // The moved object hid none of the light from there before (no triangle of it among
@@ -289,14 +288,15 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
         // box but not under it: 3,081 of a `rooms` chair's 4,752 faces were redone by the
         // box test alone.)
         let reuse = old.get(&(point.x.to_bits(), point.y.to_bits())).and_then(|i| {
-            let f = &mut old_faces[*i];
+            let f = &m.faces[*i];
             if f.occluders.iter().any(|t| moved.contains(t)) {
                 return None;
             }
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
-            // (Each old face has its own interior point: taken at most once.)
-            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| std::mem::take(f))
+            // (Copied, not moved out: two sliver faces can have the same interior point, in
+            // the old arrangement as in the new, and a point may be asked for twice.)
+            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| f.clone())
         });
         if reuse.is_some() {
             kept += 1;
