@@ -112,6 +112,12 @@ impl DiscontinuityMesh {
     /// Moves object `o` from its position in `old` to the one in `new` (same topology):
     /// updates `grid` (listing `old`) and the mesh.
     pub fn move_object(&mut self, old: &Geometry, new: &Geometry, grid: &mut Grid, o: u32) -> UpdateStats {
+        self.move_object_listing(old, new, grid, o, &mut Vec::new())
+    }
+
+    /// [`Self::move_object`], appending to `changed` every receiver whose mesh it replaced
+    /// (light, triangle), in no particular order: the others are as they were.
+    pub fn move_object_listing(&mut self, old: &Geometry, new: &Geometry, grid: &mut Grid, o: u32, changed: &mut Vec<(u32, u32)>) -> UpdateStats {
         let moved = new.object_tris(o);
         grid.remove(old, moved.clone());
         grid.insert(new, moved.clone());
@@ -124,38 +130,54 @@ impl DiscontinuityMesh {
         // every receiver (dynamic VE surfaces are traced from those only).
         let t0 = Instant::now();
         let silhouettes: Vec<Silhouettes> = self.lights.iter().map(|light| Silhouettes::new(new, light, moved.clone(), tol)).collect();
-        let mut total = UpdateStats { recast_ns: ns(t0), ..UpdateStats::default() };
+        let total = UpdateStats { recast_ns: ns(t0), ..UpdateStats::default() };
         let (lights, silhouettes) = (&self.lights, &silhouettes);
         // Every light's receivers in one parallel pass: a small object's work is a few
         // hundred receivers a light, too little to keep two threads busy light by light.
-        total = total
-            + self
-                .meshes
-                .par_iter_mut()
-                .enumerate()
-                .flat_map(|(l, meshes)| meshes.par_iter_mut().enumerate().map(move |(t, slot)| (l, t as u32, slot)))
-                .map_init(Scratch::default, |scratch, (l, t, slot)| {
-                    let mut s = UpdateStats::default();
-                    if only.is_some_and(|o| !o[t as usize]) {
-                        return s;
+        let (stats, list) = self
+            .meshes
+            .par_iter_mut()
+            .enumerate()
+            .flat_map(|(l, meshes)| meshes.par_iter_mut().enumerate().map(move |(t, slot)| (l, t as u32, slot)))
+            .map_init(Scratch::default, |scratch, (l, t, slot)| {
+                let mut s = UpdateStats::default();
+                if only.is_some_and(|o| !o[t as usize]) {
+                    return (s, None);
+                }
+                let light = &lights[l];
+                let mut replaced = false;
+                if moved.contains(&t) {
+                    let t0 = Instant::now();
+                    *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
+                    s.receivers_recomputed = 1;
+                    s.own_receivers_ns = ns(t0);
+                    replaced = true;
+                } else if let Some(m) = slot.as_mut().filter(|m| boxes_meet((m.shaft.lo, m.shaft.hi), motion)) {
+                    s.receivers_in_motion_volume = 1;
+                    if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
+                        **m = u;
+                        s.receivers_updated = 1;
+                        replaced = true;
                     }
-                    let light = &lights[l];
-                    if moved.contains(&t) {
-                        let t0 = Instant::now();
-                        *slot = ReceiverMesh::compute(new, grid, light, t, tol, scratch).map(Box::new);
-                        s.receivers_recomputed = 1;
-                        s.own_receivers_ns = ns(t0);
-                    } else if let Some(m) = slot.as_mut().filter(|m| boxes_meet((m.shaft.lo, m.shaft.hi), motion)) {
-                        s.receivers_in_motion_volume = 1;
-                        if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
-                            **m = u;
-                            s.receivers_updated = 1;
-                        }
-                    }
-                    s
-                })
-                .reduce(UpdateStats::default, |a, b| a + b);
-        total
+                }
+                (s, replaced.then_some((l as u32, t)))
+            })
+            .fold(
+                || (UpdateStats::default(), Vec::new()),
+                |(a, mut v), (s, c)| {
+                    v.extend(c);
+                    (a + s, v)
+                },
+            )
+            .reduce(
+                || (UpdateStats::default(), Vec::new()),
+                |(a, mut v), (b, w)| {
+                    v.extend(w);
+                    (a + b, v)
+                },
+            );
+        changed.extend(list);
+        total + stats
     }
 }
 

@@ -130,24 +130,30 @@ fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3,
 /// edges.
 /// Receivers in parallel (on the caller's pool), the result in that order whatever the split.
 pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<MeshShadowEdge>) -> MeshEdgeCounts {
+    let receivers: Vec<(u32, u32)> = mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
     let mut counts = MeshEdgeCounts::default();
-    for (l, light) in mesh.lights.iter().enumerate() {
-        let dc = diameter_and_centre(light);
-        let receivers: Vec<&ReceiverMesh> = mesh.meshes[l].iter().flatten().map(|m| &**m).collect();
-        let parts: Vec<(MeshEdgeCounts, Vec<MeshShadowEdge>)> = receivers
-            .par_iter()
-            .map(|m| {
-                let (mut c, mut v) = (MeshEdgeCounts::default(), Vec::new());
-                receiver_edges(m, g, (l as u32, light), dc, &mut c, &mut v);
-                (c, v)
-            })
-            .collect();
-        for (c, v) in parts {
-            counts = counts + c;
-            out.extend(v);
-        }
+    for (c, v) in receivers_shadow_edges(mesh, g, &receivers) {
+        counts = counts + c;
+        out.extend(v);
     }
     counts
+}
+
+/// The shadow edges of each of `receivers` (light, triangle; none for one with no mesh), as
+/// [`mesh_shadow_edges`] makes them, in parallel on the caller's pool: after a move only the
+/// receivers whose mesh changed need theirs made again.
+pub fn receivers_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, receivers: &[(u32, u32)]) -> Vec<(MeshEdgeCounts, Vec<MeshShadowEdge>)> {
+    let lights: Vec<(f64, DVec3)> = mesh.lights.iter().map(diameter_and_centre).collect();
+    receivers
+        .par_iter()
+        .map(|&(l, t)| {
+            let (mut c, mut v) = (MeshEdgeCounts::default(), Vec::new());
+            if let Some(m) = mesh.meshes.get(l as usize).and_then(|ms| ms.get(t as usize)).and_then(|m| m.as_deref()) {
+                receiver_edges(m, g, (l, &mesh.lights[l as usize]), lights[l as usize], &mut c, &mut v);
+            }
+            (c, v)
+        })
+        .collect()
 }
 
 impl std::ops::Add for MeshEdgeCounts {

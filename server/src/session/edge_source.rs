@@ -233,6 +233,10 @@ pub fn chosen_shadow_edges<T: Copy>(errors: &[(T, f64)], tolerance: f64, out: &m
     errors.len() - (out.len() - before)
 }
 
+/// Mesh shadow edges estimated between two looks for a newer job (about a second's work
+/// on `rooms`).
+const MESH_ESTIMATE_CHUNK: usize = 2048;
+
 /// The finder's shadow edges with the area lights' replaced by the mesh's (those the
 /// mesh's estimates leave out at `tolerance` left out): point lights' hard edges stay.
 /// Returns how many of the mesh's were left out.
@@ -353,14 +357,21 @@ impl ShadowThread {
                 }
                 // Paper 003 on the mesh's edges: estimated once per state of the mesh (every
                 // edge went out above meanwhile), then only those at or above the tolerance.
+                // A newer job (an object moved, the tolerance changed) stops them between
+                // chunks; they go on from there while the mesh stays as it is.
                 if let (true, true, Some(Ok(m))) = (job.mesh, tolerance > 0.0, &mut mesh) {
                     if m.estimates_missing() {
                         let t = Instant::now();
-                        let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0));
-                        let result = with_mesh(m, finder_tolerance);
+                        let newer = || s.0.lock().unwrap_or_else(|p| p.into_inner()).job.is_some();
+                        let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0, MESH_ESTIMATE_CHUNK, newer));
                         let ms = t.elapsed().as_secs_f64() * 1e3;
-                        tracing::debug!(estimated, left_out = result.simplified - finder_simplified, ms, "mesh shadow edges simplified (paper 003)");
-                        publish_now(result, ms);
+                        if m.estimates_missing() {
+                            tracing::debug!(estimated, ms, "mesh shadow edge estimates paused for a newer job");
+                        } else {
+                            let result = with_mesh(m, finder_tolerance);
+                            tracing::debug!(estimated, left_out = result.simplified - finder_simplified, ms, "mesh shadow edges simplified (paper 003)");
+                            publish_now(result, ms);
+                        }
                     }
                 }
             })
@@ -544,6 +555,15 @@ mod tests {
         assert!(direct.sync(&moved));
         let (want_moved, _) = published(&direct, 0.0);
         assert_ne!(want_moved, want, "the short box's shadow moved");
+        // Only the receivers whose mesh the move replaced made their edges again: the same
+        // edges as a mesh built there (also after a second move, of the other box).
+        assert_eq!(published(&MeshShadows::build(&scene, &moved).unwrap(), 0.0).0, want_moved);
+        let mut twice = moved.clone();
+        let tall = scene.object_id("tallbox").unwrap() as usize;
+        twice[tall] = Affine3A::from_translation(Vec3::new(-0.03, 0.0, 0.05)) * t[tall];
+        let mut other = MeshShadows::build(&scene, &moved).unwrap();
+        assert!(other.sync(&twice));
+        assert_eq!(published(&other, 0.0).0, published(&MeshShadows::build(&scene, &twice).unwrap(), 0.0).0);
         until(&mut edges, &moved, 0.0, &want_moved, 0);
 
         // Simplification (paper 003) on the mesh's edges: the session publishes those whose
@@ -552,8 +572,18 @@ mod tests {
         // most; back at 0 every edge is there again.
         let mut finder = ShadowFinder::new(Arc::new(SceneEdgeIndex::build(&scene, &NoProgress)));
         finder.set_transforms(&moved);
+        // In chunks, stopped after the first: the rest go on from there, and until they are
+        // all made every edge is published.
         assert!(direct.estimates_missing());
-        assert_eq!(direct.estimate(&finder.scene_lights().0), want_moved.len());
+        let asked = std::cell::Cell::new(0);
+        let first = direct.estimate(&finder.scene_lights().0, 16, || {
+            asked.set(asked.get() + 1);
+            asked.get() > 1
+        });
+        assert_eq!(first, 16.min(want_moved.len()));
+        assert!(direct.estimates_missing(), "cornell has more than 16 mesh edges");
+        assert_eq!(published(&direct, 10.0), (want_moved.clone(), 0));
+        assert_eq!(first + direct.estimate(&finder.scene_lights().0, 16, || false), want_moved.len());
         assert!(!direct.estimates_missing());
         let (few, left_out) = published(&direct, 10.0);
         assert_eq!(few.len() + left_out, want_moved.len());

@@ -11,12 +11,13 @@
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::grid::Grid;
 use crate::dmesh::{area_lights_indexed, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
-use crate::edges::mesh_edges::{mesh_shadow_edges, MeshShadowEdge};
+use crate::edges::mesh_edges::{receivers_shadow_edges, MeshEdgeCounts, MeshShadowEdge};
 use crate::edges::shadow::daffine;
 use crate::edges::simplify::{self, Estimate, Job, Rules, SceneLights};
 use crate::edges::EdgeSegment;
 use edgepoint_scene::Scene;
 use glam::{Affine3A, Vec3};
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 pub struct MeshShadows {
@@ -26,10 +27,15 @@ pub struct MeshShadows {
     transforms: Vec<Affine3A>,
     /// The scene light of each of the mesh's lights.
     scene_light: Vec<u32>,
-    /// The mesh's shadow edges with their penumbrae, for the objects at `transforms`.
+    /// Each receiver's shadow edges (light, triangle; receivers with none left out): after
+    /// a move only the receivers whose mesh changed make theirs again.
+    by_receiver: BTreeMap<(u32, u32), Vec<MeshShadowEdge>>,
+    /// All of them in that order (lights × receivers × mesh edges), for the objects at
+    /// `transforms`.
     edges: Vec<MeshShadowEdge>,
-    /// Each edge's estimate (paper 003), once made for these edges.
-    errors: Option<Vec<f64>>,
+    /// The edges' estimates (paper 003), in order, as far as made: complete when there is
+    /// one per edge.
+    errors: Vec<f64>,
     rules: Rules,
 }
 
@@ -45,8 +51,9 @@ impl MeshShadows {
         let geometry = Geometry::from_scene_at(scene, transforms);
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
-        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, edges: Vec::new(), errors: None, rules: Rules::new() };
-        m.refresh_edges();
+        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), rules: Rules::new() };
+        let all: Vec<(u32, u32)> = m.mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, r)| r.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
+        m.refresh_edges(&all);
         tracing::info!(
             lights = m.mesh.lights.len(),
             triangles = m.geometry.tris.len(),
@@ -64,6 +71,7 @@ impl MeshShadows {
     pub fn sync(&mut self, transforms: &[Affine3A]) -> bool {
         let t = Instant::now();
         let mut moved = 0;
+        let mut changed = Vec::new();
         for (o, to) in transforms.iter().enumerate().take(self.transforms.len()) {
             if self.transforms[o] == *to {
                 continue;
@@ -71,15 +79,17 @@ impl MeshShadows {
             // The change of place in f64 (as the cache carries its points, `move_object`).
             let d = daffine(to) * daffine(&self.transforms[o]).inverse();
             let new = self.geometry.moved(o as u32, |p| d.transform_point3(p));
-            let stats = self.mesh.move_object(&self.geometry, &new, &mut self.grid, o as u32);
+            let stats = self.mesh.move_object_listing(&self.geometry, &new, &mut self.grid, o as u32, &mut changed);
             tracing::debug!(object = o, ?stats, "discontinuity mesh updated");
             self.geometry = new;
             self.transforms[o] = *to;
             moved += 1;
         }
         if moved > 0 {
-            self.refresh_edges();
-            tracing::debug!(objects = moved, shadow_edges = self.edges.len(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
+            changed.sort_unstable();
+            changed.dedup();
+            self.refresh_edges(&changed);
+            tracing::debug!(objects = moved, receivers_changed = changed.len(), shadow_edges = self.edges.len(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
         }
         moved > 0
     }
@@ -91,43 +101,57 @@ impl MeshShadows {
 
     /// The edges that go to the EPI at simplification tolerance `tolerance` (0: every one),
     /// each with its penumbra, appended to `out`; returns how many were left out. Until
-    /// [`Self::estimate`] has run for these edges every one goes.
+    /// [`Self::estimate`] has made every edge's estimate every one goes.
     pub fn published(&self, tolerance: f64, out: &mut Vec<(EdgeSegment, [Vec3; 2])>) -> usize {
         let all = self.edges.iter().map(|e| (e.edge, e.penumbra));
-        match &self.errors {
-            Some(errors) if tolerance > 0.0 => {
-                let with: Vec<_> = all.zip(errors.iter().copied()).collect();
-                super::edge_source::chosen_shadow_edges(&with, tolerance, out)
-            }
-            _ => {
-                out.extend(all);
-                0
-            }
+        if tolerance > 0.0 && !self.estimates_missing() {
+            let with: Vec<_> = all.zip(self.errors.iter().copied()).collect();
+            super::edge_source::chosen_shadow_edges(&with, tolerance, out)
+        } else {
+            out.extend(all);
+            0
         }
     }
 
     /// Whether [`Self::estimate`] has estimates to make.
     pub fn estimates_missing(&self) -> bool {
-        self.errors.is_none() && !self.edges.is_empty()
+        self.errors.len() < self.edges.len()
     }
 
-    /// Estimates every edge (paper 003, [`simplify::estimate`]) against `scene`, which must
-    /// have the objects at the mesh's transforms, unless done for these edges already; on
-    /// the caller's pool. Returns how many were estimated.
-    pub fn estimate(&mut self, scene: &SceneLights) -> usize {
-        if !self.estimates_missing() {
-            return 0;
+    /// Estimates the edges not estimated yet (paper 003, [`simplify::estimate`]) against
+    /// `scene`, which must have the objects at the mesh's transforms, `chunk` edges at a
+    /// time on the caller's pool, until all are or `stop` says to stop (asked before each
+    /// chunk: `rooms`' 70,000 mesh edges take about a minute, and an object moved meanwhile
+    /// makes them all stale). What was estimated stays for the next call while the mesh does
+    /// not change. Returns how many were estimated.
+    pub fn estimate(&mut self, scene: &SceneLights, chunk: usize, stop: impl Fn() -> bool) -> usize {
+        let mut n = 0;
+        while self.estimates_missing() && !stop() {
+            let from = self.errors.len();
+            let to = (from + chunk.max(1)).min(self.edges.len());
+            let jobs: Vec<Job> = self.edges[from..to].iter().map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
+            let (errors, _) = simplify::estimate(scene, &jobs, &self.rules, Estimate::FAST);
+            self.errors.extend(errors);
+            n += to - from;
         }
-        let jobs: Vec<Job> = self.edges.iter().map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
-        let (errors, _) = simplify::estimate(scene, &jobs, &self.rules, Estimate::default());
-        self.errors = Some(errors);
-        jobs.len()
+        n
     }
 
-    fn refresh_edges(&mut self) {
-        self.errors = None;
+    /// Makes the shadow edges of `receivers` again (the others' are as they were) and
+    /// forgets every estimate: a move can change the irradiance of any band.
+    fn refresh_edges(&mut self, receivers: &[(u32, u32)]) {
+        self.errors.clear();
+        let mut counts = MeshEdgeCounts::default();
+        for (r, (c, v)) in receivers.iter().zip(receivers_shadow_edges(&self.mesh, &self.geometry, receivers)) {
+            counts = counts + c;
+            if v.is_empty() {
+                self.by_receiver.remove(r);
+            } else {
+                self.by_receiver.insert(*r, v);
+            }
+        }
         self.edges.clear();
-        let counts = mesh_shadow_edges(&self.mesh, &self.geometry, &mut self.edges);
-        tracing::debug!(?counts, "mesh shadow edges");
+        self.edges.extend(self.by_receiver.values().flatten());
+        tracing::debug!(receivers = receivers.len(), ?counts, "mesh shadow edges made");
     }
 }
