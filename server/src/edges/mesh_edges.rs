@@ -30,7 +30,8 @@
 use super::simplify::penumbra_width_of;
 use super::{EdgeKind, EdgeSegment};
 use crate::dmesh::receiver::Receiver;
-use crate::dmesh::face::visible_at;
+use crate::dmesh::face::{visible_at, visible_in};
+use crate::dmesh::segments::Runs;
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::segments::Generator;
 use crate::dmesh::{DiscontinuityMesh, ReceiverMesh};
@@ -59,6 +60,19 @@ pub enum Lighting {
 /// shaft blockers.
 pub fn lighting_at(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, q: DVec2, hit: &mut Vec<u32>) -> Lighting {
     match visible_at(g, light, &m.receiver, &m.blockers, q, hit) {
+        None => Lighting::Umbra,
+        Some(v) if v.is_empty() => Lighting::Umbra,
+        Some(_) if hit.is_empty() => Lighting::Lit,
+        Some(_) => Lighting::Penumbra,
+    }
+}
+
+/// [`lighting_at`] with the receiver's blockers in runs in list order ([`visible_in`]: the
+/// same answer bit for bit, runs of blockers off the point's pyramid passed over whole; a
+/// floor under a table has thousands of blockers, and each of its edges looks at up to six
+/// points).
+fn lighting_in(g: &Geometry, light: &LightPlane, r: &Receiver, runs: &Runs, q: DVec2, hit: &mut Vec<u32>) -> Lighting {
+    match visible_in(g, light, r, runs, q, hit) {
         None => Lighting::Umbra,
         Some(v) if v.is_empty() => Lighting::Umbra,
         Some(_) if hit.is_empty() => Lighting::Lit,
@@ -178,11 +192,12 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
     let r = &m.receiver;
     let object = g.object[r.tri as usize];
     let mut hit = Vec::new();
+    let runs = Runs::new(g, &m.blockers, false);
     for (ends, gen) in &a.edges {
         let Some(gen) = gen else { continue };
         let (q0, q1) = (a.vertices[ends[0] as usize], a.vertices[ends[1] as usize]);
         let Some([ql, qr]) = sides(r, q0, q1) else { continue };
-        let (ll, lr) = (lighting_at(m, g, light, ql, &mut hit), lighting_at(m, g, light, qr, &mut hit));
+        let (ll, lr) = (lighting_in(g, light, r, &runs, ql, &mut hit), lighting_in(g, light, r, &runs, qr, &mut hit));
         let (p0, p1) = (r.to3(q0), r.to3(q1));
         let (s0, s1) = blocker_segment(g, gen, (p0, p1));
         let width = |p: DVec3| penumbra_width_of(diameter, centre, p, r.n, s0, s1);
@@ -204,7 +219,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
             }
             (Penumbra, Penumbra) => {
                 let mid = 0.5 * (q0 + q1);
-                if steep(m, g, light, mid, q1 - q0, width(r.to3(mid))) {
+                if steep(m, g, light, &runs, mid, q1 - q0, width(r.to3(mid))) {
                     counts.interior_steep += 1;
                     (EdgeKind::ShadowPenumbral, penumbra)
                 } else {
@@ -223,8 +238,9 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
 /// receiver frame) jumps by at least [`STEEP_SLOPE_JUMP`] of the penumbra's mean slope
 /// (unoccluded irradiance over the penumbra's `width`): one-sided differences of the exact
 /// irradiance at 1 and 2 steps of `width / 16` on each side. An edge whose steps leave the
-/// receiver, or whose penumbra has no width, is kept.
-pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, mid: DVec2, dir: DVec2, width: f64) -> bool {
+/// receiver, or whose penumbra has no width, is kept. The receiver's blockers are in `runs`,
+/// in list order.
+pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, runs: &Runs, mid: DVec2, dir: DVec2, width: f64) -> bool {
     let r = &m.receiver;
     let Some(nu) = dir.perp().try_normalize() else { return true };
     let delta = width / 16.0;
@@ -236,7 +252,8 @@ pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, mid: DVec2, dir
     if ![-2.0, 2.0].iter().all(|&k| r.contains(q(k))) {
         return true;
     }
-    let e = |k: f64| m.irradiance(g, light, q(k));
+    let mut hit = Vec::new();
+    let mut e = |k: f64| visible_in(g, light, r, runs, q(k), &mut hit).map_or(0.0, |v| v.irradiance());
     let below = (e(-1.0) - e(-2.0)) / delta;
     let above = (e(2.0) - e(1.0)) / delta;
     let full = Visible::new(light, r.to3(mid).as_vec3(), r.n.as_vec3()).map_or(0.0, |v| v.irradiance());
