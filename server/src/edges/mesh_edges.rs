@@ -30,7 +30,8 @@
 use super::simplify::penumbra_width_of;
 use super::{EdgeKind, EdgeSegment};
 use crate::dmesh::receiver::Receiver;
-use crate::dmesh::face::{visible_at, visible_in};
+use crate::dmesh::face::{none_can_hide, visible_at, visible_in};
+use std::collections::HashMap;
 use crate::dmesh::segments::Runs;
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::segments::Generator;
@@ -87,7 +88,7 @@ pub const SIDE_OFFSET_TOLERANCES: f64 = 1000.0;
 /// A shadow edge of the mesh with its penumbra at its ends (world vectors across it), and
 /// what paper 003's estimate of it needs ([`crate::edges::simplify`]): its light and the
 /// blocker segment whose shadow it bounds.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeshShadowEdge {
     pub edge: EdgeSegment,
     pub penumbra: [Vec3; 2],
@@ -146,26 +147,91 @@ fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3,
 pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<MeshShadowEdge>) -> MeshEdgeCounts {
     let receivers: Vec<(u32, u32)> = mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
     let mut counts = MeshEdgeCounts::default();
-    for (c, v) in receivers_shadow_edges(mesh, g, &receivers) {
-        counts = counts + c;
-        out.extend(v);
+    for e in receivers_shadow_edges(mesh, g, &receivers, None) {
+        counts = counts + e.counts;
+        out.extend(e.edges);
     }
     counts
 }
 
+/// What one arrangement edge of a receiver gave: a shadow edge of some kind, or none (an
+/// interior edge that is not steep, both sides alike, or no room beside it).
+#[derive(Debug, Clone, Copy)]
+pub enum Decision {
+    Penumbral(MeshShadowEdge),
+    Umbral(MeshShadowEdge),
+    /// Lit | umbra.
+    Hard(MeshShadowEdge),
+    Steep(MeshShadowEdge),
+    Smooth,
+    None,
+}
+
+impl Decision {
+    fn edge(&self) -> Option<MeshShadowEdge> {
+        match self {
+            Decision::Penumbral(e) | Decision::Umbral(e) | Decision::Hard(e) | Decision::Steep(e) => Some(*e),
+            Decision::Smooth | Decision::None => None,
+        }
+    }
+
+    fn count(&self, c: &mut MeshEdgeCounts) {
+        match self {
+            Decision::Penumbral(_) => c.penumbral += 1,
+            Decision::Umbral(_) => c.umbral += 1,
+            Decision::Hard(_) => c.hard += 1,
+            Decision::Steep(_) => c.interior_steep += 1,
+            Decision::Smooth => c.interior_smooth += 1,
+            Decision::None => {}
+        }
+    }
+}
+
+/// A receiver's arrangement edges (their ends' bits and generator) with what each gave.
+pub type Decisions = HashMap<([u64; 4], Generator), Decision>;
+
+/// A receiver's decisions before a move, by (light, triangle).
+pub type OldDecisions<'d> = dyn Fn((u32, u32)) -> Option<&'d Decisions> + Sync + 'd;
+
+/// One receiver's shadow edges, in its arrangement's order, with their counts and every
+/// arrangement edge's decision.
+#[derive(Debug, Clone, Default)]
+pub struct ReceiverShadowEdges {
+    pub counts: MeshEdgeCounts,
+    pub edges: Vec<MeshShadowEdge>,
+    pub decisions: Decisions,
+    /// Of the decisions, those kept from before the move.
+    pub kept: usize,
+}
+
+/// The object a move displaced, for the receivers whose mesh the move replaced: `old` the
+/// geometry before it, `tris` its triangles, `boxes` its box before and after.
+pub struct Moved<'a> {
+    pub old: &'a Geometry,
+    pub object: u32,
+    pub boxes: [(DVec3, DVec3); 2],
+}
+
 /// The shadow edges of each of `receivers` (light, triangle; none for one with no mesh), as
 /// [`mesh_shadow_edges`] makes them, in parallel on the caller's pool: after a move only the
-/// receivers whose mesh changed need theirs made again.
-pub fn receivers_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, receivers: &[(u32, u32)]) -> Vec<(MeshEdgeCounts, Vec<MeshShadowEdge>)> {
+/// receivers whose mesh changed need theirs made again. With `reuse`, an arrangement edge a
+/// receiver had before the move (same ends, same generator, not on the moved object) keeps
+/// its old decision when the moved object, where it was and where it is, hides nothing from
+/// any point the decision looked at (its two sides and the steep test's four points: the
+/// backprojection passes each of its triangles over there, so the answer is the one without
+/// it, which did not change); `reuse.1` gives a receiver's old decisions (none for the
+/// moved object's own receivers, which moved).
+pub fn receivers_shadow_edges<'d>(mesh: &DiscontinuityMesh, g: &Geometry, receivers: &[(u32, u32)], reuse: Option<(&Moved, &OldDecisions<'d>)>) -> Vec<ReceiverShadowEdges> {
     let lights: Vec<(f64, DVec3)> = mesh.lights.iter().map(diameter_and_centre).collect();
     receivers
         .par_iter()
         .map(|&(l, t)| {
-            let (mut c, mut v) = (MeshEdgeCounts::default(), Vec::new());
+            let mut out = ReceiverShadowEdges::default();
             if let Some(m) = mesh.meshes.get(l as usize).and_then(|ms| ms.get(t as usize)).and_then(|m| m.as_deref()) {
-                receiver_edges(m, g, (l, &mesh.lights[l as usize]), lights[l as usize], &mut c, &mut v);
+                let old = reuse.and_then(|(moved, old)| old((l, t)).map(|d| (moved, d)));
+                receiver_edges(m, g, (l, &mesh.lights[l as usize]), lights[l as usize], old, &mut out);
             }
-            (c, v)
+            out
         })
         .collect()
 }
@@ -183,8 +249,8 @@ impl std::ops::Add for MeshEdgeCounts {
     }
 }
 
-/// [`mesh_shadow_edges`] of one receiver mesh.
-fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane), (diameter, centre): (f64, DVec3), counts: &mut MeshEdgeCounts, out: &mut Vec<MeshShadowEdge>) {
+/// [`mesh_shadow_edges`] of one receiver mesh (see [`receivers_shadow_edges`] for `old`).
+fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane), (diameter, centre): (f64, DVec3), old: Option<(&Moved, &Decisions)>, out: &mut ReceiverShadowEdges) {
     if m.umbra || m.segments.is_empty() {
         return;
     }
@@ -193,44 +259,58 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
     let object = g.object[r.tri as usize];
     let mut hit = Vec::new();
     let runs = Runs::new(g, &m.blockers, false);
+    // The moved object's triangles, for the reuse test (all of them: a superset of those
+    // among the blockers before or after, passed over only if each one is).
+    let moved: Vec<u32> = old.map_or_else(Vec::new, |(mv, _)| g.object_tris(mv.object).collect());
     for (ends, gen) in &a.edges {
         let Some(gen) = gen else { continue };
         let (q0, q1) = (a.vertices[ends[0] as usize], a.vertices[ends[1] as usize]);
-        let Some([ql, qr]) = sides(r, q0, q1) else { continue };
-        let (ll, lr) = (lighting_in(g, light, r, &runs, ql, &mut hit), lighting_in(g, light, r, &runs, qr, &mut hit));
+        let key = ([q0.x.to_bits(), q0.y.to_bits(), q1.x.to_bits(), q1.y.to_bits()], *gen);
         let (p0, p1) = (r.to3(q0), r.to3(q1));
         let (s0, s1) = blocker_segment(g, gen, (p0, p1));
         let width = |p: DVec3| penumbra_width_of(diameter, centre, p, r.n, s0, s1);
-        let across = r.n.cross(p1 - p0).try_normalize().unwrap_or(DVec3::ZERO);
-        let penumbra = [(across * width(p0)).as_vec3(), (across * width(p1)).as_vec3()];
-        use Lighting::*;
-        let (kind, penumbra) = match (ll, lr) {
-            (Lit, Penumbra) | (Penumbra, Lit) => {
-                counts.penumbral += 1;
-                (EdgeKind::ShadowPenumbral, penumbra)
+        let mid = 0.5 * (q0 + q1);
+        let kept = old.and_then(|(mv, decisions)| {
+            let d = decisions.get(&key)?;
+            let verts = g.object_vertices(mv.object);
+            if verts.clone().any(|v| gen.uses_vertex(v)) {
+                return None;
             }
-            (Umbra, Penumbra) | (Penumbra, Umbra) => {
-                counts.umbral += 1;
-                (EdgeKind::ShadowUmbral, penumbra)
-            }
-            (Lit, Umbra) | (Umbra, Lit) => {
-                counts.hard += 1;
-                (EdgeKind::ShadowUmbral, [Vec3::ZERO; 2])
-            }
-            (Penumbra, Penumbra) => {
-                let mid = 0.5 * (q0 + q1);
-                if steep(m, g, light, &runs, mid, q1 - q0, width(r.to3(mid))) {
-                    counts.interior_steep += 1;
-                    (EdgeKind::ShadowPenumbral, penumbra)
-                } else {
-                    counts.interior_smooth += 1;
-                    continue;
+            let mut points: Vec<DVec2> = sides(r, q0, q1).map_or_else(Vec::new, |s| s.to_vec());
+            points.extend(steep_points(r, mid, q1 - q0, width(r.to3(mid))).into_iter().flatten());
+            // The boxes grown by the tolerance, as the update's faces have them: a box
+            // touching a side of the pyramid within rounding may hold a triangle that
+            // clips a sliver there.
+            let [b0, b1] = mv.boxes.map(|b| (b.0 - r.tol, b.1 + r.tol));
+            points.iter().all(|q| none_can_hide(mv.old, light, r, &moved, b0, *q) && none_can_hide(g, light, r, &moved, b1, *q))
+                .then_some(*d)
+        });
+        out.kept += kept.is_some() as usize;
+        let d = kept.unwrap_or_else(|| {
+            let Some([ql, qr]) = sides(r, q0, q1) else { return Decision::None };
+            let (ll, lr) = (lighting_in(g, light, r, &runs, ql, &mut hit), lighting_in(g, light, r, &runs, qr, &mut hit));
+            let across = r.n.cross(p1 - p0).try_normalize().unwrap_or(DVec3::ZERO);
+            let penumbra = [(across * width(p0)).as_vec3(), (across * width(p1)).as_vec3()];
+            let edge = |kind: EdgeKind, penumbra: [Vec3; 2]| MeshShadowEdge { edge: EdgeSegment { a: p0.as_vec3(), b: p1.as_vec3(), kind, object }, penumbra, light: li, blocker: (s0, s1) };
+            use Lighting::*;
+            match (ll, lr) {
+                (Lit, Penumbra) | (Penumbra, Lit) => Decision::Penumbral(edge(EdgeKind::ShadowPenumbral, penumbra)),
+                (Umbra, Penumbra) | (Penumbra, Umbra) => Decision::Umbral(edge(EdgeKind::ShadowUmbral, penumbra)),
+                (Lit, Umbra) | (Umbra, Lit) => Decision::Hard(edge(EdgeKind::ShadowUmbral, [Vec3::ZERO; 2])),
+                (Penumbra, Penumbra) => {
+                    if steep(m, g, light, &runs, mid, q1 - q0, width(r.to3(mid))) {
+                        Decision::Steep(edge(EdgeKind::ShadowPenumbral, penumbra))
+                    } else {
+                        Decision::Smooth
+                    }
                 }
+                // Both sides see the same whole light or none of it: nothing changes across.
+                _ => Decision::None,
             }
-            // Both sides see the same whole light or none of it: nothing changes across.
-            _ => continue,
-        };
-        out.push(MeshShadowEdge { edge: EdgeSegment { a: p0.as_vec3(), b: p1.as_vec3(), kind, object }, penumbra, light: li, blocker: (s0, s1) });
+        });
+        d.count(&mut out.counts);
+        out.edges.extend(d.edge());
+        out.decisions.insert(key, d);
     }
 }
 
@@ -242,22 +322,28 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
 /// in list order.
 pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, runs: &Runs, mid: DVec2, dir: DVec2, width: f64) -> bool {
     let r = &m.receiver;
-    let Some(nu) = dir.perp().try_normalize() else { return true };
+    let Some(q) = steep_points(r, mid, dir, width) else { return true };
+    let delta = width / 16.0;
+    let mut hit = Vec::new();
+    let mut e = |k: usize| visible_in(g, light, r, runs, q[k], &mut hit).map_or(0.0, |v| v.irradiance());
+    let below = (e(1) - e(0)) / delta;
+    let above = (e(3) - e(2)) / delta;
+    let full = Visible::new(light, r.to3(mid).as_vec3(), r.n.as_vec3()).map_or(0.0, |v| v.irradiance());
+    (above - below).abs() >= STEEP_SLOPE_JUMP * full / width
+}
+
+/// The points [`steep`] looks at: 2 and 1 steps of `width / 16` below the edge, 1 and 2
+/// above; `None` when it keeps the edge without looking (no direction, no width, a step off
+/// the receiver).
+fn steep_points(r: &Receiver, mid: DVec2, dir: DVec2, width: f64) -> Option<[DVec2; 4]> {
+    let nu = dir.perp().try_normalize()?;
     let delta = width / 16.0;
     // (NaN widths too.)
     if delta.is_nan() || delta <= 100.0 * r.tol {
-        return true;
+        return None;
     }
-    let q = |k: f64| mid + nu * (k * delta);
-    if ![-2.0, 2.0].iter().all(|&k| r.contains(q(k))) {
-        return true;
-    }
-    let mut hit = Vec::new();
-    let mut e = |k: f64| visible_in(g, light, r, runs, q(k), &mut hit).map_or(0.0, |v| v.irradiance());
-    let below = (e(-1.0) - e(-2.0)) / delta;
-    let above = (e(2.0) - e(1.0)) / delta;
-    let full = Visible::new(light, r.to3(mid).as_vec3(), r.n.as_vec3()).map_or(0.0, |v| v.irradiance());
-    (above - below).abs() >= STEEP_SLOPE_JUMP * full / width
+    let q = [-2.0, -1.0, 1.0, 2.0].map(|k: f64| mid + nu * (k * delta));
+    (r.contains(q[0]) && r.contains(q[3])).then_some(q)
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::grid::Grid;
 use crate::dmesh::{area_lights_indexed, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
-use crate::edges::mesh_edges::{receivers_shadow_edges, MeshEdgeCounts, MeshShadowEdge};
+use crate::edges::mesh_edges::{receivers_shadow_edges, Decisions, MeshEdgeCounts, MeshShadowEdge, Moved, OldDecisions};
 use crate::edges::shadow::daffine;
 use crate::edges::simplify::{self, Estimate, Job, Rules, SceneLights};
 use crate::edges::EdgeSegment;
@@ -27,9 +27,11 @@ pub struct MeshShadows {
     transforms: Vec<Affine3A>,
     /// The scene light of each of the mesh's lights.
     scene_light: Vec<u32>,
-    /// Each receiver's shadow edges (light, triangle; receivers with none left out): after
-    /// a move only the receivers whose mesh changed make theirs again.
-    by_receiver: BTreeMap<(u32, u32), Vec<MeshShadowEdge>>,
+    /// Each receiver's shadow edges (light, triangle; receivers with no arrangement edge
+    /// left out), and what each of its arrangement edges gave: after a move only the
+    /// receivers whose mesh changed make theirs again, keeping the decisions the moved
+    /// object cannot have changed.
+    by_receiver: BTreeMap<(u32, u32), (Vec<MeshShadowEdge>, Decisions)>,
     /// All of them in that order (lights × receivers × mesh edges), for the objects at
     /// `transforms`.
     edges: Vec<MeshShadowEdge>,
@@ -53,7 +55,7 @@ impl MeshShadows {
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
         let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), rules: Rules::new() };
         let all: Vec<(u32, u32)> = m.mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, r)| r.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
-        m.refresh_edges(&all);
+        m.refresh_edges(&all, None);
         tracing::info!(
             lights = m.mesh.lights.len(),
             triangles = m.geometry.tris.len(),
@@ -72,6 +74,9 @@ impl MeshShadows {
         let t = Instant::now();
         let mut moved = 0;
         let mut changed = Vec::new();
+        // With one object moved, the geometry before it and its boxes (for keeping the
+        // decisions it cannot have changed).
+        let mut one: Option<(Geometry, u32, [(glam::DVec3, glam::DVec3); 2])> = None;
         for (o, to) in transforms.iter().enumerate().take(self.transforms.len()) {
             if self.transforms[o] == *to {
                 continue;
@@ -81,14 +86,17 @@ impl MeshShadows {
             let new = self.geometry.moved(o as u32, |p| d.transform_point3(p));
             let stats = self.mesh.move_object_listing(&self.geometry, &new, &mut self.grid, o as u32, &mut changed);
             tracing::debug!(object = o, ?stats, "discontinuity mesh updated");
-            self.geometry = new;
+            let boxes = [self.geometry.object_bounds(o as u32), new.object_bounds(o as u32)];
+            let before = std::mem::replace(&mut self.geometry, new);
+            one = (moved == 0).then_some((before, o as u32, boxes));
             self.transforms[o] = *to;
             moved += 1;
         }
         if moved > 0 {
             changed.sort_unstable();
             changed.dedup();
-            self.refresh_edges(&changed);
+            let mv = one.as_ref().map(|(old, object, boxes)| Moved { old, object: *object, boxes: *boxes });
+            self.refresh_edges(&changed, mv.as_ref());
             tracing::debug!(objects = moved, receivers_changed = changed.len(), shadow_edges = self.edges.len(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
         }
         moved > 0
@@ -137,21 +145,26 @@ impl MeshShadows {
         n
     }
 
-    /// Makes the shadow edges of `receivers` again (the others' are as they were) and
-    /// forgets every estimate: a move can change the irradiance of any band.
-    fn refresh_edges(&mut self, receivers: &[(u32, u32)]) {
+    /// Makes the shadow edges of `receivers` again (the others' are as they were), after
+    /// `moved` moved if given, and forgets every estimate: a move can change the
+    /// irradiance of any band.
+    fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>) {
         self.errors.clear();
         let mut counts = MeshEdgeCounts::default();
-        for (r, (c, v)) in receivers.iter().zip(receivers_shadow_edges(&self.mesh, &self.geometry, receivers)) {
-            counts = counts + c;
-            if v.is_empty() {
+        let by = &self.by_receiver;
+        let own = moved.map(|m| m.old.object_tris(m.object));
+        let old = |(l, t): (u32, u32)| by.get(&(l, t)).filter(|_| !own.as_ref().is_some_and(|o| o.contains(&t))).map(|e| &e.1);
+        let made = receivers_shadow_edges(&self.mesh, &self.geometry, receivers, moved.map(|m| (m, &old as &OldDecisions<'_>)));
+        for (r, e) in receivers.iter().zip(made) {
+            counts = counts + e.counts;
+            if e.decisions.is_empty() {
                 self.by_receiver.remove(r);
             } else {
-                self.by_receiver.insert(*r, v);
+                self.by_receiver.insert(*r, (e.edges, e.decisions));
             }
         }
         self.edges.clear();
-        self.edges.extend(self.by_receiver.values().flatten());
+        self.edges.extend(self.by_receiver.values().flat_map(|e| e.0.iter().copied()));
         tracing::debug!(receivers = receivers.len(), ?counts, "mesh shadow edges made");
     }
 }

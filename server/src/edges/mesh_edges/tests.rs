@@ -212,3 +212,40 @@ fn an_interior_edge_where_another_shadow_starts_is_steep() {
     let c = counts_of(&g, light);
     assert!(c.interior_steep > 0, "{c:?}");
 }
+
+/// After a move, the receivers the update replaced make their edges again keeping the
+/// decisions the moved object cannot have changed ([`receivers_shadow_edges`] with `reuse`):
+/// the same edges, in the same order, as making every one afresh, over random scenes (and
+/// `cornell`) and random moves of every object; and decisions are kept.
+#[test]
+fn edges_kept_across_a_move_equal_edges_made_afresh() {
+    let mut rng = Rng::new(23);
+    let (mut kept, mut made) = (0, 0);
+    for (mut g, lights) in crate::dmesh::tests::random_scenes_and_cornell(&mut rng, 8) {
+        let mut grid = Grid::build(&g, GRID_TRIANGLES_PER_VOXEL);
+        let mut mesh = DiscontinuityMesh::compute(&g, &grid, &lights);
+        let objects = g.tri_start.len() as u32;
+        let size = (g.bounds().1 - g.bounds().0).length();
+        for i in 0..8 {
+            let all: Vec<(u32, u32)> = mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
+            let before: std::collections::HashMap<(u32, u32), Decisions> = all.iter().copied().zip(receivers_shadow_edges(&mesh, &g, &all, None)).map(|(r, e)| (r, e.decisions)).collect();
+            let o = 1 + i % (objects - 1);
+            let d = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * (0.05 * size);
+            let new = g.moved(o, |p| p + d);
+            let mut changed = Vec::new();
+            mesh.move_object_listing(&g, &new, &mut grid, o, &mut changed);
+            let moved = Moved { old: &g, object: o, boxes: [g.object_bounds(o), new.object_bounds(o)] };
+            let own = g.object_tris(o);
+            let old = |(l, t): (u32, u32)| before.get(&(l, t)).filter(|_| !own.contains(&t));
+            let with = receivers_shadow_edges(&mesh, &new, &changed, Some((&moved, &old as &OldDecisions<'_>)));
+            let fresh = receivers_shadow_edges(&mesh, &new, &changed, None);
+            for ((r, a), b) in changed.iter().zip(&with).zip(&fresh) {
+                assert_eq!((a.counts, &a.edges), (b.counts, &b.edges), "receiver {r:?} after moving object {o} by {d}");
+                kept += a.kept;
+                made += a.decisions.len();
+            }
+            g = new;
+        }
+    }
+    assert!(kept > 0 && kept < made, "{kept} of {made} decisions kept");
+}
