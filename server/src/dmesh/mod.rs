@@ -109,7 +109,7 @@ impl ReceiverMesh {
     }
 
     /// Irradiance per unit radiance at receiver point `q` (receiver frame), from the
-    /// backprojection of the face holding it.
+    /// pointwise backprojection there with the receiver's blockers.
     pub fn irradiance(&self, g: &Geometry, light: &LightPlane, q: DVec2) -> f64 {
         let mut hit = Vec::new();
         face::visible_at(g, light, &self.receiver, &self.blockers, q, &mut hit).map_or(0.0, |v| v.irradiance())
@@ -303,6 +303,11 @@ impl DiscontinuityMesh {
     /// Every receiver mesh of every light.
     pub fn receivers(&self) -> impl Iterator<Item = &ReceiverMesh> {
         self.meshes.iter().flatten().flatten().map(|m| &**m)
+    }
+
+    /// (light, triangle) of every receiver with a mesh, lights first.
+    pub fn receiver_ids(&self) -> Vec<(u32, u32)> {
+        self.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect()
     }
 
     pub fn segment_count(&self) -> usize {

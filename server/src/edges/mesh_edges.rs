@@ -60,7 +60,12 @@ pub enum Lighting {
 /// What receiver point `q` (receiver frame) of mesh `m` sees of `light`, with the receiver's
 /// shaft blockers.
 pub fn lighting_at(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, q: DVec2, hit: &mut Vec<u32>) -> Lighting {
-    match visible_at(g, light, &m.receiver, &m.blockers, q, hit) {
+    lighting_of(visible_at(g, light, &m.receiver, &m.blockers, q, hit), hit)
+}
+
+/// What a visible part (`None`: none) and the blockers that hid some of it say.
+fn lighting_of(vis: Option<Visible>, hit: &[u32]) -> Lighting {
+    match vis {
         None => Lighting::Umbra,
         Some(v) if v.is_empty() => Lighting::Umbra,
         Some(_) if hit.is_empty() => Lighting::Lit,
@@ -73,12 +78,7 @@ pub fn lighting_at(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, q: DVec2,
 /// floor under a table has thousands of blockers, and each of its edges looks at up to six
 /// points).
 fn lighting_in(g: &Geometry, light: &LightPlane, r: &Receiver, runs: &Runs, q: DVec2, hit: &mut Vec<u32>) -> Lighting {
-    match visible_in(g, light, r, runs, q, hit) {
-        None => Lighting::Umbra,
-        Some(v) if v.is_empty() => Lighting::Umbra,
-        Some(_) if hit.is_empty() => Lighting::Lit,
-        Some(_) => Lighting::Penumbra,
-    }
+    lighting_of(visible_in(g, light, r, runs, q, hit), hit)
 }
 
 /// How far beside an edge its sides are looked at, in mesh tolerances (10⁻⁹ of the scene's
@@ -145,7 +145,7 @@ fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3,
 /// edges.
 /// Receivers in parallel (on the caller's pool), the result in that order whatever the split.
 pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<MeshShadowEdge>) -> MeshEdgeCounts {
-    let receivers: Vec<(u32, u32)> = mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
+    let receivers = mesh.receiver_ids();
     let mut counts = MeshEdgeCounts::default();
     for e in receivers_shadow_edges(mesh, g, &receivers, None) {
         counts = counts + e.counts;
@@ -205,7 +205,7 @@ pub struct ReceiverShadowEdges {
 }
 
 /// The object a move displaced, for the receivers whose mesh the move replaced: `old` the
-/// geometry before it, `tris` its triangles, `boxes` its box before and after.
+/// geometry before it, `object` the object, `boxes` its box before and after.
 pub struct Moved<'a> {
     pub old: &'a Geometry,
     pub object: u32,
@@ -262,6 +262,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
     // The moved object's triangles, for the reuse test (all of them: a superset of those
     // among the blockers before or after, passed over only if each one is).
     let moved: Vec<u32> = old.map_or_else(Vec::new, |(mv, _)| g.object_tris(mv.object).collect());
+    let moved_verts = old.map(|(mv, _)| g.object_vertices(mv.object));
     for (ends, gen) in &a.edges {
         let Some(gen) = gen else { continue };
         let (q0, q1) = (a.vertices[ends[0] as usize], a.vertices[ends[1] as usize]);
@@ -272,8 +273,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
         let mid = 0.5 * (q0 + q1);
         let kept = old.and_then(|(mv, decisions)| {
             let d = decisions.get(&key)?;
-            let verts = g.object_vertices(mv.object);
-            if verts.clone().any(|v| gen.uses_vertex(v)) {
+            if moved_verts.clone().into_iter().flatten().any(|v| gen.uses_vertex(v)) {
                 return None;
             }
             let mut points: Vec<DVec2> = sides(r, q0, q1).map_or_else(Vec::new, |s| s.to_vec());
@@ -298,7 +298,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
                 (Umbra, Penumbra) | (Penumbra, Umbra) => Decision::Umbral(edge(EdgeKind::ShadowUmbral, penumbra)),
                 (Lit, Umbra) | (Umbra, Lit) => Decision::Hard(edge(EdgeKind::ShadowUmbral, [Vec3::ZERO; 2])),
                 (Penumbra, Penumbra) => {
-                    if steep(m, g, light, &runs, mid, q1 - q0, width(r.to3(mid))) {
+                    if steep(g, light, r, &runs, mid, q1 - q0, width(r.to3(mid))) {
                         Decision::Steep(edge(EdgeKind::ShadowPenumbral, penumbra))
                     } else {
                         Decision::Smooth
@@ -320,8 +320,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
 /// irradiance at 1 and 2 steps of `width / 16` on each side. An edge whose steps leave the
 /// receiver, or whose penumbra has no width, is kept. The receiver's blockers are in `runs`,
 /// in list order.
-pub fn steep(m: &ReceiverMesh, g: &Geometry, light: &LightPlane, runs: &Runs, mid: DVec2, dir: DVec2, width: f64) -> bool {
-    let r = &m.receiver;
+pub fn steep(g: &Geometry, light: &LightPlane, r: &Receiver, runs: &Runs, mid: DVec2, dir: DVec2, width: f64) -> bool {
     let Some(q) = steep_points(r, mid, dir, width) else { return true };
     let delta = width / 16.0;
     let mut hit = Vec::new();

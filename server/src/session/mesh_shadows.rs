@@ -54,8 +54,7 @@ impl MeshShadows {
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
         let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), rules: Rules::new() };
-        let all: Vec<(u32, u32)> = m.mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, r)| r.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
-        m.refresh_edges(&all, None);
+        m.refresh_edges(&m.mesh.receiver_ids(), None);
         tracing::info!(
             lights = m.mesh.lights.len(),
             triangles = m.geometry.tris.len(),
@@ -74,8 +73,8 @@ impl MeshShadows {
         let t = Instant::now();
         let mut moved = 0;
         let mut changed = Vec::new();
-        // With one object moved, the geometry before it and its boxes (for keeping the
-        // decisions it cannot have changed).
+        // With exactly one object moved, the geometry before it and its boxes (for keeping
+        // the decisions it cannot have changed); a second one moved clears it.
         let mut one: Option<(Geometry, u32, [(glam::DVec3, glam::DVec3); 2])> = None;
         for (o, to) in transforms.iter().enumerate().take(self.transforms.len()) {
             if self.transforms[o] == *to {
@@ -150,13 +149,14 @@ impl MeshShadows {
     /// irradiance of any band.
     fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>) {
         self.errors.clear();
-        let mut counts = MeshEdgeCounts::default();
+        let (mut counts, mut kept) = (MeshEdgeCounts::default(), 0);
         let by = &self.by_receiver;
         let own = moved.map(|m| m.old.object_tris(m.object));
         let old = |(l, t): (u32, u32)| by.get(&(l, t)).filter(|_| !own.as_ref().is_some_and(|o| o.contains(&t))).map(|e| &e.1);
         let made = receivers_shadow_edges(&self.mesh, &self.geometry, receivers, moved.map(|m| (m, &old as &OldDecisions<'_>)));
         for (r, e) in receivers.iter().zip(made) {
             counts = counts + e.counts;
+            kept += e.kept;
             if e.decisions.is_empty() {
                 self.by_receiver.remove(r);
             } else {
@@ -165,6 +165,6 @@ impl MeshShadows {
         }
         self.edges.clear();
         self.edges.extend(self.by_receiver.values().flat_map(|e| e.0.iter().copied()));
-        tracing::debug!(receivers = receivers.len(), ?counts, "mesh shadow edges made");
+        tracing::debug!(receivers = receivers.len(), decisions_kept = kept, ?counts, "mesh shadow edges made");
     }
 }

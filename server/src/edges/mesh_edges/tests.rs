@@ -227,7 +227,7 @@ fn edges_kept_across_a_move_equal_edges_made_afresh() {
         let objects = g.tri_start.len() as u32;
         let size = (g.bounds().1 - g.bounds().0).length();
         for i in 0..8 {
-            let all: Vec<(u32, u32)> = mesh.meshes.iter().enumerate().flat_map(|(l, ms)| ms.iter().enumerate().filter(|(_, m)| m.is_some()).map(move |(t, _)| (l as u32, t as u32))).collect();
+            let all = mesh.receiver_ids();
             let before: std::collections::HashMap<(u32, u32), Decisions> = all.iter().copied().zip(receivers_shadow_edges(&mesh, &g, &all, None)).map(|(r, e)| (r, e.decisions)).collect();
             let o = 1 + i % (objects - 1);
             let d = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * (0.05 * size);
