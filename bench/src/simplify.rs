@@ -28,6 +28,18 @@ pub struct SimplifyArgs {
     /// With --estimates: surface points per object for the triples.
     #[arg(long, value_name = "N", default_value_t = 4000)]
     pub triple_points: usize,
+    /// With --estimates: then slide --object this many times along X (as a drag does) and
+    /// measure the estimates kept across each move against all made afresh there, for the
+    /// finder's shadow edges and (scenes with an area light) the discontinuity mesh's.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub moves: usize,
+    /// With --moves: the object to slide (default: the smallest object of 8 triangles or
+    /// more).
+    #[arg(long, value_name = "NAME")]
+    pub object: Option<String>,
+    /// With --moves: each move's length, as a fraction of the object's box diagonal.
+    #[arg(long, value_name = "F", default_value_t = 0.05)]
+    pub move_step: f64,
 }
 
 fn shadow_edges(r: &Value) -> u64 {
@@ -48,7 +60,8 @@ pub fn run(args: SimplifyArgs) -> Result<()> {
     if args.estimates {
         let scene = edgepoint_scene::data::load_builtin(&f.scene.scene, f.scene.data_dir.as_deref(), &edgepoint_scene::NoProgress)
             .map_err(anyhow::Error::msg)?;
-        let (v, table) = crate::simplify_estimates::run(scene, &f.scene.scene, args.triple_points, args.compare, args.tolerance)?;
+        let moves = crate::simplify_estimates::Moves { count: args.moves, object: args.object.clone(), step: args.move_step };
+        let (v, table) = crate::simplify_estimates::run(scene, &f.scene.scene, args.triple_points, args.compare, args.tolerance, &moves)?;
         crate::emit(f.json, &v, &table);
         return Ok(());
     }

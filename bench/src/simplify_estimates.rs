@@ -7,11 +7,18 @@
 //! pool (CPU time of the process), with the largest differences from the first; and the
 //! same with the other lights bounded where not comparable (a different estimate: its largest
 //! relative difference, and how many decisions at the tolerance it changes).
+//!
+//! With `--moves N`, an object then slides N times along X, and after each move the
+//! estimates kept across it ([`SceneLights::still_holds`]) are measured against all made
+//! afresh there — how many kept, how many made again, the times, and how many differ (must
+//! be 0) — for the finder's shadow edges and for the discontinuity mesh's
+//! ([`MeshShadows`]).
 use crate::clock::process_cpu_ms;
 use anyhow::Result;
 use edgepoint_scene::Scene;
 use edgepoint_server::edges::finder::{EdgeFinder, ViewVolume};
-use edgepoint_server::edges::simplify::{estimate, jobs, Culls, Estimate, Rules};
+use edgepoint_server::edges::simplify::{estimate, jobs, Culls, EdgeErrors, Estimate, Rules, SceneLights};
+use edgepoint_server::session::mesh_shadows::MeshShadows;
 use edgepoint_server::edges::EdgeSegment;
 use edgepoint_server::reference::LogProgress;
 use edgepoint_server::session::TripleKey;
@@ -24,7 +31,7 @@ fn culls_json(c: &Culls) -> Value {
 }
 
 /// Runs the estimates on `scene` (`what` names it for the workers' scene cache).
-pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, tolerance: f64) -> Result<(Value, String)> {
+pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, tolerance: f64, moves: &Moves) -> Result<(Value, String)> {
     let progress = LogProgress::new("simplify");
     let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
     let mut finder = EdgeFinder::new(&scene, &progress);
@@ -64,7 +71,9 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
     let worst_exits = differ(&exits);
     let worst_bounded = differ(&fast);
     let flips = fast.iter().zip(&without).filter(|(a, b)| (**a >= tolerance) != (**b >= tolerance)).count();
+    let (moved, moved_table) = if moves.count > 0 { run_moves(&scene, &triples, moves)? } else { (Value::Null, String::new()) };
     let v = json!({
+        "moves": moved,
         "scene": scene.name,
         "triples": triples.len(),
         "shadow_edges": all.len(),
@@ -117,5 +126,90 @@ pub fn run(scene: Scene, what: &str, triple_points: usize, compare: usize, toler
         flips,
         tolerance
     );
-    Ok((v, table))
+    Ok((v, table + &moved_table))
+}
+
+/// What `--moves` asks for.
+pub struct Moves {
+    pub count: usize,
+    pub object: Option<String>,
+    pub step: f64,
+}
+
+/// The estimates across `moves.count` slides of the object, for the finder and the mesh.
+fn run_moves(scene: &Scene, triples: &[TripleKey], moves: &Moves) -> Result<(Value, String)> {
+    let object = match &moves.object {
+        Some(name) => scene.object_id(name).ok_or_else(|| anyhow::anyhow!("{} has no object {name}", scene.name))? as usize,
+        None => (0..scene.objects.len())
+            .filter(|i| scene.objects[*i].mesh.triangles.len() >= 8)
+            .min_by(|i, j| {
+                let d = |k: usize| {
+                    let (lo, hi) = scene.object_bounds(k);
+                    (hi - lo).length()
+                };
+                d(*i).total_cmp(&d(*j))
+            })
+            .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", scene.name))?,
+    };
+    let (lo, hi) = scene.object_bounds(object);
+    let step = (hi - lo).length() * moves.step as f32;
+    let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+    let mut finder = EdgeFinder::new(scene, &edgepoint_scene::NoProgress);
+    let view = ViewVolume::new(&scene.camera, 1.0);
+    let mut out: Vec<EdgeSegment> = Vec::new();
+    finder.frame(&t, scene.camera.eye, Some(&view), triples.iter().copied(), 85.0, &mut out);
+    let mut kept = EdgeErrors::new();
+    let w = Instant::now();
+    let (all, _) = finder.errors(&mut kept);
+    let finder_all_ms = w.elapsed().as_secs_f64() * 1e3;
+    let w = Instant::now();
+    let mut mesh = MeshShadows::build(scene, &t);
+    let mesh_build_ms = w.elapsed().as_secs_f64() * 1e3;
+    let w = Instant::now();
+    let mesh_edges = mesh.as_mut().map_or(0, |m| m.estimate(&finder.scene_lights().0, 4096, || false));
+    let mesh_all_ms = w.elapsed().as_secs_f64() * 1e3;
+    let bits = |v: &[(EdgeSegment, f64)]| v.iter().map(|(e, x)| (e.a.to_array().map(f32::to_bits), e.b.to_array().map(f32::to_bits), x.to_bits())).collect::<Vec<_>>();
+    let mut per_move = Vec::new();
+    let mut table = format!("moves of {}: finder {} edges estimated in {finder_all_ms:.0} ms; mesh {mesh_edges} edges (built in {mesh_build_ms:.0} ms) estimated in {mesh_all_ms:.0} ms\n", scene.objects[object].name, all.len());
+    for k in 0..moves.count {
+        // Back and forth along X, as `--move-object` slides it.
+        let dir = if (k / 4) % 2 == 0 { 1.0 } else { -1.0 };
+        t[object] = Affine3A::from_translation(glam::Vec3::X * step * dir) * t[object];
+        finder.frame(&t, scene.camera.eye, Some(&view), triples.iter().copied(), 85.0, &mut out);
+        let (carried, dropped) = (kept.carried, kept.dropped);
+        let w = Instant::now();
+        let (after, again) = finder.errors(&mut kept);
+        let finder_ms = w.elapsed().as_secs_f64() * 1e3;
+        let w = Instant::now();
+        let (fresh, _) = finder.errors(&mut EdgeErrors::new());
+        let finder_fresh_ms = w.elapsed().as_secs_f64() * 1e3;
+        let finder_differ = bits(&after).iter().zip(bits(&fresh)).filter(|(a, b)| **a != *b).count() + after.len().abs_diff(fresh.len());
+        let mut m = json!({
+            "finder": {"edges": after.len(), "kept": kept.carried - carried, "dropped": kept.dropped - dropped, "estimated": again, "ms": finder_ms, "afresh_ms": finder_fresh_ms, "differ": finder_differ},
+        });
+        table += &format!("move {k}: finder {} edges, {} kept, {again} estimated in {finder_ms:.0} ms (afresh {finder_fresh_ms:.0} ms), {finder_differ} differ", after.len(), kept.carried - carried);
+        if let Some(mesh) = mesh.as_mut() {
+            let lights: SceneLights = finder.scene_lights().0;
+            let w = Instant::now();
+            mesh.sync(&t);
+            let sync_ms = w.elapsed().as_secs_f64() * 1e3;
+            let w = Instant::now();
+            let dropped = mesh.check_estimates(&lights);
+            let check_ms = w.elapsed().as_secs_f64() * 1e3;
+            let w = Instant::now();
+            let again = mesh.estimate(&lights, 4096, || false);
+            let est_ms = w.elapsed().as_secs_f64() * 1e3;
+            let with_kept = mesh.keyed_estimates();
+            mesh.forget_estimates();
+            let w = Instant::now();
+            let all = mesh.estimate(&lights, 4096, || false);
+            let fresh_ms = w.elapsed().as_secs_f64() * 1e3;
+            let differ = with_kept.iter().zip(mesh.keyed_estimates()).filter(|(a, b)| **a != *b).count();
+            m["mesh"] = json!({"edges": all, "dropped": dropped, "estimated": again, "kept": all - again, "update_ms": sync_ms, "check_ms": check_ms, "estimate_ms": est_ms, "afresh_ms": fresh_ms, "differ": differ});
+            table += &format!("; mesh {all} edges, {} kept, {dropped} dropped, {again} estimated in {:.0} ms (check {check_ms:.0} ms; afresh {fresh_ms:.0} ms), {differ} differ", all - again, est_ms);
+        }
+        table += "\n";
+        per_move.push(m);
+    }
+    Ok((json!({"object": scene.objects[object].name, "step": step, "finder_all_ms": finder_all_ms, "mesh_build_ms": mesh_build_ms, "mesh_edges": mesh_edges, "mesh_all_ms": mesh_all_ms, "per_move": per_move}), table))
 }

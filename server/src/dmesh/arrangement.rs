@@ -8,9 +8,9 @@
 //! In f64 with a length tolerance: near-coincident points become one vertex, collinear
 //! overlapping segments share their edges, and a segment end within the tolerance of
 //! another segment is put on it.
+use super::fast_hash::FastMap;
 use super::segments::{Generator, Segment};
 use glam::DVec2;
-use std::collections::HashMap;
 
 #[derive(Debug, Clone, Default)]
 pub struct Arrangement {
@@ -131,31 +131,51 @@ impl Arrangement {
 }
 
 /// Snaps points closer than the tolerance to one vertex (a hash of cells twice the
-/// tolerance; the neighbours of the cell are searched too).
+/// tolerance; the neighbouring cells within the tolerance are searched too).
 struct Snap {
     cell: f64,
+    tol: f64,
     tol2: f64,
-    map: HashMap<(i64, i64), Vec<u32>>,
+    /// Per cell its first and last vertex; `next` chains each cell's vertices in the order
+    /// they came (no list allocated per cell).
+    map: FastMap<(i64, i64), (u32, u32)>,
+    next: Vec<u32>,
     vertices: Vec<DVec2>,
 }
 
 impl Snap {
     fn id(&mut self, p: DVec2) -> u32 {
-        let (cx, cy) = ((p.x / self.cell).floor() as i64, (p.y / self.cell).floor() as i64);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                if let Some(list) = self.map.get(&(cx + dx, cy + dy)) {
-                    for &v in list {
-                        if self.vertices[v as usize].distance_squared(p) <= self.tol2 {
-                            return v;
-                        }
+        let c = |x: f64| (x / self.cell).floor() as i64;
+        let (cx, cy) = (c(p.x), c(p.y));
+        // Only the cells a point within the tolerance (grown by 1 %, above the rounding) can
+        // lie in: one or two of the three each way, in the order of the 3 × 3 search they
+        // replace (the same vertex found first).
+        let r = 1.01 * self.tol;
+        let (x0, x1) = (c(p.x - r).max(cx - 1), c(p.x + r).min(cx + 1));
+        let (y0, y1) = (c(p.y - r).max(cy - 1), c(p.y + r).min(cy + 1));
+        for x in x0..=x1 {
+            for y in y0..=y1 {
+                let mut at = self.map.get(&(x, y)).map_or(u32::MAX, |c| c.0);
+                while at != u32::MAX {
+                    if self.vertices[at as usize].distance_squared(p) <= self.tol2 {
+                        return at;
                     }
+                    at = self.next[at as usize];
                 }
             }
         }
         let v = self.vertices.len() as u32;
         self.vertices.push(p);
-        self.map.entry((cx, cy)).or_default().push(v);
+        self.next.push(u32::MAX);
+        match self.map.entry((cx, cy)) {
+            std::collections::hash_map::Entry::Occupied(mut c) => {
+                self.next[c.get().1 as usize] = v;
+                c.get_mut().1 = v;
+            }
+            std::collections::hash_map::Entry::Vacant(c) => {
+                c.insert((v, v));
+            }
+        }
         v
     }
 }
@@ -165,8 +185,9 @@ pub fn build(corners: &[DVec2; 3], segments: &[Segment], tol: f64) -> Arrangemen
     let mut items: Vec<(DVec2, DVec2, Option<Generator>)> = (0..3).map(|k| (corners[k], corners[(k + 1) % 3], None)).collect();
     items.extend(segments.iter().map(|s| (s.a, s.b, Some(s.generator))));
     let n = items.len();
-    // Split parameters per item: its ends, crossings, and other items' ends lying on it.
-    let mut splits: Vec<Vec<f64>> = vec![vec![0.0, 1.0]; n];
+    // Split parameters (item, parameter): each item's ends, crossings, and other items'
+    // ends lying on it; in one list, sorted by item then parameter below.
+    let mut splits: Vec<(u32, f64)> = (0..n as u32).flat_map(|i| [(i, 0.0), (i, 1.0)]).collect();
     let boxes: Vec<(DVec2, DVec2)> = items.iter().map(|(a, b, _)| (a.min(*b) - tol, a.max(*b) + tol)).collect();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|i, j| boxes[*i].0.x.total_cmp(&boxes[*j].0.x));
@@ -187,30 +208,29 @@ pub fn build(corners: &[DVec2; 3], segments: &[Segment], tol: f64) -> Arrangemen
                 let u = (c - a).perp_dot(r) / den;
                 let (ti, uj) = (tol / r.length(), tol / s.length());
                 if t > -ti && t < 1.0 + ti && u > -uj && u < 1.0 + uj {
-                    splits[i].push(t.clamp(0.0, 1.0));
-                    splits[j].push(u.clamp(0.0, 1.0));
+                    splits.push((i as u32, t.clamp(0.0, 1.0)));
+                    splits.push((j as u32, u.clamp(0.0, 1.0)));
                 }
             }
             // Ends of each on the other (collinear overlaps, T-junctions within tolerance).
-            for (k, l, p) in [(i, j, c), (i, j, d), (j, i, a), (j, i, b)] {
+            for (k, p) in [(i, c), (i, d), (j, a), (j, b)] {
                 let (e0, e1, _) = items[k];
                 let e = e1 - e0;
                 let t = (p - e0).dot(e) / e.length_squared();
                 if (-1e-12..=1.0 + 1e-12).contains(&t) && (e0 + e * t).distance(p) <= tol {
-                    splits[k].push(t.clamp(0.0, 1.0));
+                    splits.push((k as u32, t.clamp(0.0, 1.0)));
                 }
-                let _ = l;
             }
         }
     }
-    let mut snap = Snap { cell: 2.0 * tol, tol2: tol * tol, map: HashMap::new(), vertices: Vec::new() };
-    let mut edge_ids: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut snap = Snap { cell: 2.0 * tol, tol, tol2: tol * tol, map: FastMap::default(), next: Vec::new(), vertices: Vec::new() };
+    let mut edge_ids: FastMap<(u32, u32), u32> = FastMap::default();
     let mut edges: Vec<([u32; 2], Option<Generator>)> = Vec::new();
-    for (i, (a, b, gen)) in items.iter().enumerate() {
-        let sp = &mut splits[i];
-        sp.sort_by(f64::total_cmp);
+    splits.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+    for sp in splits.chunk_by(|x, y| x.0 == y.0) {
+        let (a, b, gen) = &items[sp[0].0 as usize];
         let mut prev: Option<u32> = None;
-        for &t in sp.iter() {
+        for &(_, t) in sp {
             let v = snap.id(a.lerp(*b, t));
             if let Some(p) = prev {
                 if p != v {
@@ -238,13 +258,14 @@ fn half_edges(vertices: Vec<DVec2>, edges: Vec<([u32; 2], Option<Generator>)>) -
     }
     let mut arr = Arrangement { vertices, edges, next: Vec::new(), faces: Vec::new(), components: 0 };
     let dir = |arr: &Arrangement, h: u32| arr.vertices[arr.origin(h ^ 1) as usize] - arr.vertices[arr.origin(h) as usize];
-    // Position of each half-edge in its origin's counter-clockwise order.
+    // Position of each half-edge in its origin's counter-clockwise order (each angle once).
+    let angle: Vec<f64> = (0..arr.edges.len() as u32 * 2).map(|h| {
+        let d = dir(&arr, h);
+        d.y.atan2(d.x)
+    }).collect();
     let mut slot = vec![0u32; arr.edges.len() * 2];
     for list in out_of.iter_mut() {
-        list.sort_by(|a, b| {
-            let (da, db) = (dir(&arr, *a), dir(&arr, *b));
-            da.y.atan2(da.x).total_cmp(&db.y.atan2(db.x))
-        });
+        list.sort_by(|a, b| angle[*a as usize].total_cmp(&angle[*b as usize]));
         for (k, h) in list.iter().enumerate() {
             slot[*h as usize] = k as u32;
         }

@@ -715,12 +715,14 @@ fn may_meet(lines: &Lines) -> bool {
         let (a0, a1, b0, b1) = (f(e[0], 0.0), f(e[0], 1.0), f(e[1], 0.0), f(e[1], 1.0));
         // g(s) = fa(s) · fb(s) < 0 somewhere in [0, 1]: both linear; test at the ends and
         // at their roots.
-        let mut ss = vec![0.0, 1.0];
+        let (mut ss, mut n) = ([0.0, 1.0, 0.0, 0.0], 2);
         for (p, q) in [(a0, a1), (b0, b1)] {
             if (p > 0.0) != (q > 0.0) {
-                ss.push(p / (p - q));
+                ss[n] = p / (p - q);
+                n += 1;
             }
         }
+        let ss = &mut ss[..n];
         ss.sort_by(f64::total_cmp);
         let lerp = |p: f64, q: f64, s: f64| p + (q - p) * s;
         let neg = |s: f64| lerp(a0, a1, s) * lerp(b0, b1, s) < 0.0;

@@ -3,10 +3,10 @@
 //! triangles in f64 with welded vertex ids, and the adjacency the generators need — the
 //! triangles around each edge (is it a silhouette from a light vertex?) and the neighbours
 //! of each vertex (is a plane through it tangent to its object?).
+use super::fast_hash::FastMap;
 use super::solid::Solids;
 use edgepoint_scene::Scene;
 use glam::DVec3;
-use std::collections::HashMap;
 
 /// An undirected edge by its two vertex ids, smaller first.
 pub type EdgeKey = (u32, u32);
@@ -32,7 +32,7 @@ pub struct Geometry {
     pub vertex_start: Vec<u32>,
     pub tri_start: Vec<u32>,
     /// Triangles around each edge.
-    pub edge_tris: HashMap<EdgeKey, Vec<u32>>,
+    pub edge_tris: FastMap<EdgeKey, Vec<u32>>,
     /// Neighbour vertices of each vertex (over its triangles), sorted, no repeats.
     pub neighbours: Vec<Vec<u32>>,
     /// The closed components and their boxes (receivers in their own umbra).
@@ -78,7 +78,7 @@ impl Geometry {
     }
 
     fn from_parts(pos: Vec<DVec3>, tris: Vec<[u32; 3]>, object: Vec<u32>, vertex_start: Vec<u32>, tri_start: Vec<u32>) -> Geometry {
-        let mut edge_tris: HashMap<EdgeKey, Vec<u32>> = HashMap::with_capacity(tris.len() * 3 / 2);
+        let mut edge_tris: FastMap<EdgeKey, Vec<u32>> = FastMap::with_capacity_and_hasher(tris.len() * 3 / 2, Default::default());
         let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); pos.len()];
         for (ti, t) in tris.iter().enumerate() {
             for k in 0..3 {

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 pub mod arrangement;
 pub mod eee;
 pub mod face;
+pub mod fast_hash;
 pub mod geometry;
 pub mod grid;
 pub mod receiver;
@@ -104,7 +105,8 @@ impl ReceiverMesh {
         mut reuse: impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
     ) -> ReceiverMesh {
         let (segments, arrangement) = arrange(g, &receiver, &blockers, &traces, &eee);
-        let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut reuse);
+        let points = interior_points(&arrangement);
+        let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &points, &mut reuse);
         ReceiverMesh { receiver, shaft, blockers, traces, eee, segments, arrangement, faces, umbra: false }
     }
 
@@ -148,14 +150,20 @@ pub fn visible_segments(g: &Geometry, receiver: &Receiver, blockers: &[u32], tra
     segments
 }
 
-/// One backprojection per bounded face of `arrangement`, from `reuse` (an old face's, by
-/// interior point and area) or computed.
+/// A point inside each bounded face of `arrangement` ([`Arrangement::interior_point`]).
+pub fn interior_points(arrangement: &Arrangement) -> Vec<DVec2> {
+    (0..arrangement.faces.len()).map(|f| arrangement.interior_point(f)).collect()
+}
+
+/// One backprojection per bounded face of `arrangement` (at its point in `points`), from
+/// `reuse` (an old face's, by interior point and area) or computed.
 pub fn face_backprojections(
     g: &Geometry,
     light: &LightPlane,
     receiver: &Receiver,
     blockers: &[u32],
     arrangement: &Arrangement,
+    points: &[DVec2],
     reuse: &mut impl FnMut(DVec2, f64) -> Option<FaceBackprojection>,
 ) -> Vec<FaceBackprojection> {
     // The blockers' runs once for the faces to compute (none when every face is kept), in
@@ -167,7 +175,7 @@ pub fn face_backprojections(
     let mut runs = None;
     (0..arrangement.faces.len())
         .map(|f| {
-            let point = arrangement.interior_point(f);
+            let point = points[f];
             reuse(point, arrangement.faces[f].area2).unwrap_or_else(|| {
                 let runs = runs.get_or_insert_with(|| segments::Runs::new(g, blockers, false));
                 FaceBackprojection::compute(g, light, receiver, runs, point)

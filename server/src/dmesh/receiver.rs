@@ -165,11 +165,11 @@ pub struct Shaft {
 }
 
 impl Shaft {
-    pub fn new(light: &[DVec3], receiver: &[DVec3; 3], tol: f64) -> Shaft {
+    pub fn new(light: &[DVec3], receiver: &[DVec3], tol: f64) -> Shaft {
         let pts: Vec<DVec3> = light.iter().chain(receiver.iter()).copied().collect();
         let (lo, hi) = pts.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let mut planes = Vec::new();
-        for (poly, other) in [(light, &receiver[..]), (&receiver[..], light)] {
+        for (poly, other) in [(light, receiver), (receiver, light)] {
             let k = poly.len();
             for i in 0..k {
                 let (a, b) = (poly[i], poly[(i + 1) % k]);

@@ -37,7 +37,7 @@ fn find(p: &mut [u32], mut x: u32) -> u32 {
 }
 
 impl Solids {
-    pub fn new(pos: &[DVec3], tris: &[[u32; 3]], edge_tris: &HashMap<EdgeKey, Vec<u32>>) -> Solids {
+    pub fn new(pos: &[DVec3], tris: &[[u32; 3]], edge_tris: &super::fast_hash::FastMap<EdgeKey, Vec<u32>>) -> Solids {
         let n = tris.len();
         // +1 for each triangle walking the edge from its smaller id, −1 the other way.
         let mut walk: HashMap<EdgeKey, i32> = HashMap::with_capacity(edge_tris.len());

@@ -32,11 +32,11 @@ use super::face::none_can_hide;
 use super::segments::Segment;
 use super::eee::{self, EeeSurface};
 use super::receiver::LightAbove;
-use super::{arrangement, face_backprojections, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
+use super::fast_hash::FastMap;
+use super::{arrangement, face_backprojections, interior_points, umbra, visible_segments, DiscontinuityMesh, ReceiverMesh, Scratch};
 use edgepoint_scene::backprojection::LightPlane;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::time::Instant;
 
 /// What one move touched, and where its time went (CPU nanoseconds summed over threads,
@@ -291,9 +291,18 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
     // By interior point alone: a backprojection is a function of the point (and the
     // blockers), not of the face's shape; the face's area, summed from wherever its cycle
     // starts, can differ in its last bits between two arrangements of the same face.
-    let old: HashMap<(u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| ((f.point.x.to_bits(), f.point.y.to_bits()), i)).collect();
+    let bits = |p: DVec2| (p.x.to_bits(), p.y.to_bits());
+    let old: FastMap<(u64, u64), usize> = m.faces.iter().enumerate().map(|(i, f)| (bits(f.point), i)).collect();
+    // How many new faces have each interior point: an old face asked for once is moved out,
+    // one asked for more often (two sliver faces can share an interior point, in the old
+    // arrangement as in the new) is copied.
+    let points = interior_points(&arrangement);
+    let mut asked: FastMap<(u64, u64), u32> = FastMap::default();
+    for p in &points {
+        *asked.entry(bits(*p)).or_default() += 1;
+    }
     let (mut kept, mut redone) = (0, 0);
-    let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &mut |point, _area2| {
+    let faces = face_backprojections(g, light, &receiver, &blockers, &arrangement, &points, &mut |point, _area2| {
         // The moved object hid none of the light from there before (no triangle of it among
         // the occluders: the visible part is the light less the occluders' shadows) and its
         // box now misses the box from there to the light: the visible part is the same.
@@ -309,16 +318,14 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
         // old one. (Most faces of a receiver the object's shadow moves across are in its
         // box but not under it: 3,081 of a `rooms` chair's 4,752 faces were redone by the
         // box test alone.)
-        let reuse = old.get(&(point.x.to_bits(), point.y.to_bits())).and_then(|i| {
-            let f = &m.faces[*i];
-            if f.occluders.iter().any(|t| moved.contains(t)) {
+        let reuse = old.get(&bits(point)).and_then(|&i| {
+            if m.faces[i].occluders.iter().any(|t| moved.contains(t)) {
                 return None;
             }
             let p = receiver.to3(point);
             let (lo, hi) = above.clipped.iter().fold((p, p), |(lo, hi), c| (lo.min(*c), hi.max(*c)));
-            // (Copied, not moved out: two sliver faces can have the same interior point, in
-            // the old arrangement as in the new, and a point may be asked for twice.)
-            (!boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point)).then(|| f.clone())
+            let keep = !boxes_meet((lo, hi), near_new) || none_can_hide(g, light, &receiver, &new_moved, near_new, point);
+            keep.then(|| if asked[&bits(point)] == 1 { std::mem::take(&mut m.faces[i]) } else { m.faces[i].clone() })
         });
         if reuse.is_some() {
             kept += 1;

@@ -382,8 +382,8 @@ impl ShadowFinder {
     }
 
     /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
-    pub fn estimates_missing(&self, errors: &EdgeErrors) -> bool {
-        errors.missing(&self.store, &self.lights, &self.transforms)
+    pub fn estimates_missing(&self, errors: &mut EdgeErrors) -> bool {
+        errors.missing(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
     }
 }
 

@@ -511,6 +511,37 @@ impl<'a> SceneLights<'a> {
         Some(self.band_error(&band, k, rules, how, culls))
     }
 
+    /// [`Self::edge_error`] with the band it was made over (infinite with none where none
+    /// can be made).
+    pub fn edge_estimate(&self, (e, k, s0, s1): &Job, rules: &Rules, how: Estimate, culls: &mut Culls) -> Estimated {
+        let k = *k as usize;
+        match (k < self.lights.len()).then(|| self.edge_band(e, k, *s0, *s1)).flatten() {
+            Some(band) => Estimated { error: self.band_error(&band, k, rules, how, culls), band: Some(band) },
+            None => Estimated { error: f64::INFINITY, band: None },
+        }
+    }
+
+    /// Whether estimate `e` is still the estimate after objects moved within `boxes` (world
+    /// boxes, before and after each move): every point of its band sees every light through
+    /// the convex hull of the band and the light, and where no box meets any of those hulls
+    /// no light's irradiance at any of the band's nodes changed — the same estimate, bit for
+    /// bit, as the face walks and shadow rays meet the same faces. The boxes are grown by
+    /// more than the f32 rounding of the nodes. One with no band is made again.
+    pub fn still_holds(&self, e: &Estimated, boxes: &[(DVec3, DVec3)]) -> bool {
+        let Some(band) = &e.band else { return false };
+        if boxes.is_empty() {
+            return true;
+        }
+        let corners = band.corners();
+        (0..self.lights.len()).all(|k| {
+            let light = self.light_points(k);
+            let size = corners.iter().chain(&light).map(|p| p.abs().max_element()).fold(1.0, f64::max);
+            let margin = 1e-5 * size;
+            let shaft = crate::dmesh::receiver::Shaft::new(&light, &corners, margin);
+            boxes.iter().all(|(lo, hi)| !shaft.may_meet_box((*lo - margin, *hi + margin), margin))
+        })
+    }
+
     /// The band of shadow edge `e` of light `k` (see [`Self::edge_error`]).
     pub fn edge_band(&self, e: &EdgeSegment, k: usize, s0: DVec3, s1: DVec3) -> Option<Band> {
         let (a, b) = (e.a.as_dvec3(), e.b.as_dvec3());
@@ -580,16 +611,47 @@ pub fn penumbrae(scene: &SceneLights, jobs: &[Job]) -> Vec<[Vec3; 2]> {
 /// The estimates of `jobs` on the rayon pool (infinite where none can be made), with
 /// what the culls skipped.
 pub fn estimate(scene: &SceneLights, jobs: &[Job], rules: &Rules, how: Estimate) -> (Vec<f64>, Culls) {
-    let out: Vec<(f64, Culls)> = jobs
+    let (out, culls) = estimate_over_bands(scene, jobs, rules, how);
+    (out.into_iter().map(|e| e.error).collect(), culls)
+}
+
+/// [`estimate`], each with the band it was made over (to carry it across a move,
+/// [`SceneLights::still_holds`]).
+pub fn estimate_over_bands(scene: &SceneLights, jobs: &[Job], rules: &Rules, how: Estimate) -> (Vec<Estimated>, Culls) {
+    let out: Vec<(Estimated, Culls)> = jobs
         .par_iter()
         .map(|job| {
             let mut c = Culls::default();
-            (scene.edge_error(job, rules, how, &mut c).unwrap_or(f64::INFINITY), c)
+            (scene.edge_estimate(job, rules, how, &mut c), c)
         })
         .collect();
     let mut culls = Culls::default();
     out.iter().for_each(|(_, c)| culls.add(c));
     (out.into_iter().map(|(e, _)| e).collect(), culls)
+}
+
+/// An edge's estimate with the band it was made over: whether a move leaves it as it was
+/// is a question about the band alone ([`SceneLights::still_holds`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimated {
+    pub error: f64,
+    /// `None` where no estimate could be made (the error is infinite).
+    pub band: Option<Band>,
+}
+
+/// The world boxes, before and after, of every object whose transform differs between
+/// `before` and `after` (object-space boxes from the face hierarchies' roots), for
+/// [`SceneLights::still_holds`].
+pub fn moved_boxes(bvhs: &[FaceBvh], before: &[Affine3A], after: &[Affine3A]) -> Vec<(DVec3, DVec3)> {
+    let at = |t: &[Affine3A], o: usize| *t.get(o).unwrap_or(&Affine3A::IDENTITY);
+    (0..bvhs.len())
+        .filter(|o| at(before, *o) != at(after, *o))
+        .filter_map(|o| bvhs[o].root.map(|r| (o, (Vec3::from(r.lo), Vec3::from(r.hi)))))
+        .flat_map(|(o, b)| [at(before, o), at(after, o)].map(|t| {
+            let (lo, hi) = super::finder::world_box(&t, b);
+            (lo.as_dvec3(), hi.as_dvec3())
+        }))
+        .collect()
 }
 
 fn key(light: u32, e: &EdgeSegment) -> EdgeKey {
@@ -598,17 +660,21 @@ fn key(light: u32, e: &EdgeSegment) -> EdgeKey {
 }
 
 /// The estimate of every stored shadow edge, kept from update to update: an edge already
-/// estimated under the same lights and transforms is not estimated again (a move anywhere
-/// can change any band's irradiance, so a move forgets them all).
+/// estimated under the same lights is not estimated again, and after a move only if the
+/// moved objects can reach its band ([`SceneLights::still_holds`]; other lights: all made
+/// again).
 #[derive(Default)]
 pub struct EdgeErrors {
     /// How the estimates are made ([`Estimate::FAST`] by default; others only to compare).
     pub how: Estimate,
     /// What the culls skipped, summed over every estimate made.
     pub culls: Culls,
+    /// Estimates kept across moves, and dropped because a move reached their band.
+    pub carried: usize,
+    pub dropped: usize,
     lights: Vec<Light>,
     transforms: Vec<Affine3A>,
-    known: HashMap<EdgeKey, f64>,
+    known: HashMap<EdgeKey, Estimated>,
     rules: Rules,
 }
 
@@ -617,28 +683,39 @@ impl EdgeErrors {
         EdgeErrors { rules: Rules::new(), ..Default::default() }
     }
 
-    /// Whether [`Self::update`] would estimate any edge of `store`.
-    pub fn missing(&self, store: &ShadowStore, lights: &[Light], transforms: &[Affine3A]) -> bool {
-        if self.lights != lights || self.transforms != transforms {
-            return store.segment_count() > 0;
+    /// Brings the known estimates to `lights` and `transforms`: other lights forget them
+    /// all; moved objects forget those whose band they can reach.
+    fn sync(&mut self, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) {
+        if self.lights != lights {
+            self.known.clear();
+            self.lights = lights.to_vec();
+        } else if self.transforms != transforms {
+            let boxes = moved_boxes(bvhs, &self.transforms, transforms);
+            let scene = SceneLights::new(lights, bvhs, transforms);
+            let before = self.known.len();
+            self.known.retain(|_, e| scene.still_holds(e, &boxes));
+            self.carried += self.known.len();
+            self.dropped += before - self.known.len();
         }
+        self.transforms = transforms.to_vec();
+    }
+
+    /// Whether [`Self::update`] would estimate any edge of `store`.
+    pub fn missing(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> bool {
+        self.sync(lights, bvhs, transforms);
         store.events_with_edges().any(|((l, _), _, segs)| segs.iter().any(|e| !self.known.contains_key(&key(l, e))))
     }
 
     /// Every shadow edge of `store` with its error (infinite where none can be estimated:
     /// such an edge always stays), in the store's order, and how many were estimated now.
     pub fn update(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> (Vec<(EdgeSegment, f64)>, usize) {
-        if self.lights != lights || self.transforms != transforms {
-            self.known.clear();
-            self.lights = lights.to_vec();
-            self.transforms = transforms.to_vec();
-        }
+        self.sync(lights, bvhs, transforms);
         let scene = SceneLights::new(lights, bvhs, transforms);
         let all = jobs(store, transforms);
         let todo: Vec<Job> = all.iter().filter(|(e, l, _, _)| !self.known.contains_key(&key(*l, e))).copied().collect();
-        let (errs, culls) = estimate(&scene, &todo, &self.rules, self.how);
+        let (errs, culls) = estimate_over_bands(&scene, &todo, &self.rules, self.how);
         self.culls.add(&culls);
-        let fresh: Vec<(EdgeKey, f64)> = todo.iter().zip(errs).map(|((e, l, _, _), err)| (key(*l, e), err)).collect();
+        let fresh: Vec<(EdgeKey, Estimated)> = todo.iter().zip(errs).map(|((e, l, _, _), err)| (key(*l, e), err)).collect();
         let estimated = fresh.len();
         self.known.extend(fresh);
         // Edges no longer stored are forgotten.
@@ -646,7 +723,7 @@ impl EdgeErrors {
             let live: std::collections::HashSet<EdgeKey> = all.iter().map(|(e, l, _, _)| key(*l, e)).collect();
             self.known.retain(|k, _| live.contains(k));
         }
-        let out = all.into_iter().map(|(e, l, _, _)| (e, self.known.get(&key(l, &e)).copied().unwrap_or(f64::INFINITY))).collect();
+        let out = all.into_iter().map(|(e, l, _, _)| (e, self.known.get(&key(l, &e)).map_or(f64::INFINITY, |x| x.error))).collect();
         (out, estimated)
     }
 }

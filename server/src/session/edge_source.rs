@@ -19,7 +19,10 @@
 //! - Several lights (paper 003): with a simplification tolerance above 0 the shadow thread
 //!   also estimates, per shadow edge, the error of leaving it out where the other lights
 //!   wash it out ([`crate::edges::simplify`]), and publishes only the edges at or above
-//!   the tolerance. At 0 nothing is estimated and every edge goes to the EPI.
+//!   the tolerance. At 0 nothing is estimated and every edge goes to the EPI. An estimate
+//!   outlives a move that leaves its edge as it was and whose boxes miss the hulls of its
+//!   band and every light ([`crate::edges::simplify::SceneLights::still_holds`]): while an
+//!   object is dragged only the edges near it are estimated again.
 //! - Soft shadows: the shadow thread publishes every area-light shadow edge with its
 //!   penumbra's extent at its ends; each frame only the part of it whose penumbra is narrow
 //!   on screen goes to the EPI as a barrier ([`crate::epi::soft`]), and interpolation
@@ -319,7 +322,7 @@ impl ShadowThread {
                     // The estimates of new edges can take longer than the update (seconds
                     // on `rooms`): every edge goes out first, so shadows show meanwhile.
                     let with_penumbrae = crate::background::pool().install(|| finder.with_penumbrae());
-                    if finder.estimates_missing(&errors) {
+                    if finder.estimates_missing(&mut errors) {
                         publish(ShadowResult { segments: with_penumbrae.clone(), stats, simplified: 0, tolerance: 0.0 }, ms);
                     }
                     let t = Instant::now();
@@ -348,6 +351,12 @@ impl ShadowThread {
                     crate::background::pool().install(|| match &mut mesh {
                         Some(Ok(m)) => {
                             m.sync(&job.transforms);
+                            // The estimates the move cannot have changed stay: the edges go
+                            // out simplified at once, but for those estimated again below.
+                            if tolerance > 0.0 {
+                                let dropped = m.check_estimates(&finder.scene_lights().0);
+                                tracing::debug!(dropped, "mesh shadow edge estimates checked after a move");
+                            }
                         }
                         _ => mesh = Some(MeshShadows::build(&scene, &job.transforms).ok_or(())),
                     });
@@ -355,23 +364,27 @@ impl ShadowThread {
                         publish_now(with_mesh(m, finder_tolerance), t.elapsed().as_secs_f64() * 1e3);
                     }
                 }
-                // Paper 003 on the mesh's edges: estimated once per state of the mesh (every
-                // edge went out above meanwhile), then only those at or above the tolerance.
-                // A newer job (an object moved, the tolerance changed) stops them between
-                // chunks; they go on from there while the mesh stays as it is.
+                // Paper 003 on the mesh's edges: those not estimated yet (all at first; after
+                // a move the new ones and those whose band it reached) are estimated, and went
+                // out above meanwhile; then only those at or above the tolerance. A newer job
+                // (an object moved, the tolerance changed) stops them between chunks; they go
+                // on from there.
                 if let (true, true, Some(Ok(m))) = (job.mesh, tolerance > 0.0, &mut mesh) {
                     if m.estimates_missing() {
                         let t = Instant::now();
                         let newer = || s.0.lock().unwrap_or_else(|p| p.into_inner()).job.is_some();
                         let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0, MESH_ESTIMATE_CHUNK, newer));
                         let ms = t.elapsed().as_secs_f64() * 1e3;
+                        // Published also when paused: the edges estimated so far are
+                        // decided, the others go.
+                        let result = with_mesh(m, finder_tolerance);
+                        let left_out = result.simplified - finder_simplified;
                         if m.estimates_missing() {
-                            tracing::debug!(estimated, ms, "mesh shadow edge estimates paused for a newer job");
+                            tracing::debug!(estimated, left_out, ms, "mesh shadow edge estimates paused for a newer job");
                         } else {
-                            let result = with_mesh(m, finder_tolerance);
-                            tracing::debug!(estimated, left_out = result.simplified - finder_simplified, ms, "mesh shadow edges simplified (paper 003)");
-                            publish_now(result, ms);
+                            tracing::debug!(estimated, left_out, ms, "mesh shadow edges simplified (paper 003)");
                         }
+                        publish_now(result, ms);
                     }
                 }
             })
@@ -572,8 +585,8 @@ mod tests {
         // most; back at 0 every edge is there again.
         let mut finder = ShadowFinder::new(Arc::new(SceneEdgeIndex::build(&scene, &NoProgress)));
         finder.set_transforms(&moved);
-        // In chunks, stopped after the first: the rest go on from there, and until they are
-        // all made every edge is published.
+        // In chunks, stopped after the first: the rest go on from there, and meanwhile those
+        // not estimated are published.
         assert!(direct.estimates_missing());
         let asked = std::cell::Cell::new(0);
         let first = direct.estimate(&finder.scene_lights().0, 16, || {
@@ -582,7 +595,8 @@ mod tests {
         });
         assert_eq!(first, 16.min(want_moved.len()));
         assert!(direct.estimates_missing(), "cornell has more than 16 mesh edges");
-        assert_eq!(published(&direct, 10.0), (want_moved.clone(), 0));
+        let (part, part_left_out) = published(&direct, 10.0);
+        assert!(part_left_out <= 16 && part.len() + part_left_out == want_moved.len(), "{part_left_out} left out");
         assert_eq!(first + direct.estimate(&finder.scene_lights().0, 16, || false), want_moved.len());
         assert!(!direct.estimates_missing());
         let (few, left_out) = published(&direct, 10.0);
@@ -590,6 +604,19 @@ mod tests {
         assert!(left_out > want_moved.len() / 2, "{left_out} of {} left out", want_moved.len());
         until(&mut edges, &moved, 10.0, &few, left_out);
         until(&mut edges, &moved, 0.0, &want_moved, 0);
+
+        // Estimates outlive a move that cannot reach their band: after the tall box moves,
+        // those kept and those made again equal the estimates all made afresh there.
+        assert!(direct.sync(&twice));
+        assert!(direct.estimates_missing());
+        finder.set_transforms(&twice);
+        let dropped = direct.check_estimates(&finder.scene_lights().0);
+        let again = direct.estimate(&finder.scene_lights().0, 16, || false);
+        let kept = direct.keyed_estimates();
+        direct.forget_estimates();
+        let all = direct.estimate(&finder.scene_lights().0, 4096, || false);
+        assert_eq!(kept, direct.keyed_estimates());
+        assert!(dropped > 0 && again < all, "{dropped} dropped, {again} of {all} estimated again");
     }
 
     /// Tolerance 0 is off: every edge goes to the EPI, whatever its estimate (even 0).

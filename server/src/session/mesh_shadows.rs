@@ -6,14 +6,18 @@
 //!
 //! With a simplification tolerance (paper 003) each mesh edge is estimated as the finder's
 //! shadow edges are ([`crate::edges::simplify`]: the L2 error of leaving it out over a band
-//! across it, against the irradiance of every light), once per state of the mesh, and only
-//! the edges at or above the tolerance are published.
+//! across it, against the irradiance of every light), and only the edges at or above the
+//! tolerance are published. An estimate outlives a move that leaves its edge as it was and
+//! cannot reach its band ([`SceneLights::still_holds`]): after a chair moves in `rooms` a
+//! few thousand of 70,000 edges are estimated again, not all.
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::grid::Grid;
 use crate::dmesh::{area_lights_indexed, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
 use crate::edges::mesh_edges::{receivers_shadow_edges, Decisions, MeshEdgeCounts, MeshShadowEdge, Moved, OldDecisions};
 use crate::edges::shadow::daffine;
-use crate::edges::simplify::{self, Estimate, Job, Rules, SceneLights};
+use crate::edges::simplify::{self, Estimate, Estimated, Job, Rules, SceneLights};
+use glam::DVec3;
+use std::collections::HashMap;
 use crate::edges::EdgeSegment;
 use edgepoint_scene::Scene;
 use glam::{Affine3A, Vec3};
@@ -35,9 +39,13 @@ pub struct MeshShadows {
     /// All of them in that order (lights × receivers × mesh edges), for the objects at
     /// `transforms`.
     edges: Vec<MeshShadowEdge>,
-    /// The edges' estimates (paper 003), in order, as far as made: complete when there is
-    /// one per edge.
-    errors: Vec<f64>,
+    /// The edges' estimates (paper 003), in order, where made (and kept across moves).
+    errors: Vec<Option<Estimated>>,
+    /// How many of `errors` are `None`.
+    missing: usize,
+    /// World boxes (before and after) of the moves since the estimates were last checked
+    /// against them: until then none is known to hold.
+    unchecked: Vec<(DVec3, DVec3)>,
     rules: Rules,
 }
 
@@ -53,7 +61,7 @@ impl MeshShadows {
         let geometry = Geometry::from_scene_at(scene, transforms);
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
-        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), rules: Rules::new() };
+        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), missing: 0, unchecked: Vec::new(), rules: Rules::new() };
         m.refresh_edges(&m.mesh.receiver_ids(), None);
         tracing::info!(
             lights = m.mesh.lights.len(),
@@ -86,6 +94,7 @@ impl MeshShadows {
             let stats = self.mesh.move_object_listing(&self.geometry, &new, &mut self.grid, o as u32, &mut changed);
             tracing::debug!(object = o, ?stats, "discontinuity mesh updated");
             let boxes = [self.geometry.object_bounds(o as u32), new.object_bounds(o as u32)];
+            self.unchecked.extend(boxes);
             let before = std::mem::replace(&mut self.geometry, new);
             one = (moved == 0).then_some((before, o as u32, boxes));
             self.transforms[o] = *to;
@@ -107,12 +116,12 @@ impl MeshShadows {
     }
 
     /// The edges that go to the EPI at simplification tolerance `tolerance` (0: every one),
-    /// each with its penumbra, appended to `out`; returns how many were left out. Until
-    /// [`Self::estimate`] has made every edge's estimate every one goes.
+    /// each with its penumbra, appended to `out`; returns how many were left out. An edge
+    /// not estimated yet goes (and every one while a move's estimates are unchecked).
     pub fn published(&self, tolerance: f64, out: &mut Vec<(EdgeSegment, [Vec3; 2])>) -> usize {
         let all = self.edges.iter().map(|e| (e.edge, e.penumbra));
-        if tolerance > 0.0 && !self.estimates_missing() {
-            let with: Vec<_> = all.zip(self.errors.iter().copied()).collect();
+        if tolerance > 0.0 && self.unchecked.is_empty() {
+            let with: Vec<_> = all.zip(self.errors.iter().map(|e| e.map_or(f64::NAN, |e| e.error))).collect();
             super::edge_source::chosen_shadow_edges(&with, tolerance, out)
         } else {
             out.extend(all);
@@ -120,35 +129,80 @@ impl MeshShadows {
         }
     }
 
-    /// Whether [`Self::estimate`] has estimates to make.
+    /// Whether [`Self::estimate`] has estimates to make or to check.
     pub fn estimates_missing(&self) -> bool {
-        self.errors.len() < self.edges.len()
+        self.missing > 0 || !self.unchecked.is_empty()
     }
 
-    /// Estimates the edges not estimated yet (paper 003, [`simplify::estimate`]) against
-    /// `scene`, which must have the objects at the mesh's transforms, `chunk` edges at a
-    /// time on the caller's pool, until all are or `stop` says to stop (asked before each
-    /// chunk: `rooms`' 70,000 mesh edges take about a minute, and an object moved meanwhile
-    /// makes them all stale). What was estimated stays for the next call while the mesh does
-    /// not change. Returns how many were estimated.
+    /// Estimates the edges not estimated yet (paper 003, [`simplify::estimate_over_bands`])
+    /// against `scene`, which must have the objects at the mesh's transforms, `chunk` edges
+    /// at a time on the caller's pool, until all are or `stop` says to stop (asked before
+    /// each chunk: `rooms`' 70,000 mesh edges take about a minute). First the estimates kept
+    /// across moves are checked against the moved boxes, and those a move can have changed
+    /// are dropped. What was estimated stays for the next call, also across moves that do
+    /// not reach it. Returns how many were estimated.
     pub fn estimate(&mut self, scene: &SceneLights, chunk: usize, stop: impl Fn() -> bool) -> usize {
+        self.check_estimates(scene);
         let mut n = 0;
-        while self.estimates_missing() && !stop() {
-            let from = self.errors.len();
-            let to = (from + chunk.max(1)).min(self.edges.len());
-            let jobs: Vec<Job> = self.edges[from..to].iter().map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
-            let (errors, _) = simplify::estimate(scene, &jobs, &self.rules, Estimate::FAST);
-            self.errors.extend(errors);
-            n += to - from;
+        let mut next = 0;
+        while self.missing > 0 && !stop() {
+            let mut at = Vec::with_capacity(chunk.max(1));
+            while at.len() < chunk.max(1) && next < self.errors.len() {
+                if self.errors[next].is_none() {
+                    at.push(next);
+                }
+                next += 1;
+            }
+            let jobs: Vec<Job> = at.iter().map(|i| self.edges[*i]).map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
+            let (errors, _) = simplify::estimate_over_bands(scene, &jobs, &self.rules, Estimate::FAST);
+            for (i, e) in at.iter().zip(errors) {
+                self.errors[*i] = Some(e);
+            }
+            self.missing -= at.len();
+            n += at.len();
         }
         n
     }
 
+    /// Every edge's identity with its estimate's bits, sorted (to compare two meshes'
+    /// estimates: tests, the benchmark).
+    pub fn keyed_estimates(&self) -> Vec<(EdgeKey, Option<u64>)> {
+        let mut v: Vec<_> = self.edges.iter().zip(&self.errors).map(|(e, x)| (edge_key(e), x.map(|x| x.error.to_bits()))).collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Forgets every estimate (to make them all afresh: tests, the benchmark).
+    pub fn forget_estimates(&mut self) {
+        self.errors.iter_mut().for_each(|e| *e = None);
+        self.missing = self.errors.len();
+    }
+
+    /// Checks the estimates kept across moves against the moved boxes (against `scene` at
+    /// the mesh's transforms), dropping those a move can have changed; returns how many
+    /// were dropped. Fast (no face is walked): done before the edges after a move are
+    /// published, so that they go out simplified.
+    pub fn check_estimates(&mut self, scene: &SceneLights) -> usize {
+        use rayon::prelude::*;
+        if self.unchecked.is_empty() {
+            return 0;
+        }
+        let boxes = std::mem::take(&mut self.unchecked);
+        self.errors.par_iter_mut().for_each(|e| {
+            if e.is_some_and(|x| !scene.still_holds(&x, &boxes)) {
+                *e = None;
+            }
+        });
+        let before = self.missing;
+        self.missing = self.errors.iter().filter(|e| e.is_none()).count();
+        self.missing - before
+    }
+
     /// Makes the shadow edges of `receivers` again (the others' are as they were), after
-    /// `moved` moved if given, and forgets every estimate: a move can change the
-    /// irradiance of any band.
+    /// `moved` moved if given. An edge made the same as before keeps its estimate, to be
+    /// checked against the move ([`Self::estimate`]).
     fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>) {
-        self.errors.clear();
+        let known: HashMap<EdgeKey, Estimated> = self.edges.iter().zip(&self.errors).filter_map(|(e, x)| Some((edge_key(e), (*x)?))).collect();
         let (mut counts, mut kept) = (MeshEdgeCounts::default(), 0);
         let by = &self.by_receiver;
         let own = moved.map(|m| m.old.object_tris(m.object));
@@ -165,6 +219,18 @@ impl MeshShadows {
         }
         self.edges.clear();
         self.edges.extend(self.by_receiver.values().flat_map(|e| e.0.iter().copied()));
+        self.errors = self.edges.iter().map(|e| known.get(&edge_key(e)).copied()).collect();
+        self.missing = self.errors.iter().filter(|e| e.is_none()).count();
         tracing::debug!(receivers = receivers.len(), decisions_kept = kept, ?counts, "mesh shadow edges made");
     }
+}
+
+/// An edge's identity across a move: its light, receiver, kind, ends and blocker, bit for
+/// bit.
+pub type EdgeKey = (u32, u32, u8, [u32; 6], [u64; 6]);
+
+fn edge_key(e: &MeshShadowEdge) -> EdgeKey {
+    let [a, b] = [e.edge.a, e.edge.b].map(|p| p.to_array().map(f32::to_bits));
+    let [c, d] = [e.blocker.0, e.blocker.1].map(|p| p.to_array().map(f64::to_bits));
+    (e.light, e.edge.object, e.edge.kind as u8, [a[0], a[1], a[2], b[0], b[1], b[2]], [c[0], c[1], c[2], d[0], d[1], d[2]])
 }

@@ -14,7 +14,7 @@
 mod edge_source;
 mod feedback;
 mod frame_loop;
-mod mesh_shadows;
+pub mod mesh_shadows;
 pub mod move_shadows;
 pub mod memory;
 mod output;

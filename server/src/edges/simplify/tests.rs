@@ -435,3 +435,42 @@ fn orientation_of_closed_meshes() {
     let parts = edgepoint_scene::builtin::shapes::Parts { positions: inside_out.positions.clone(), triangles: inside_out.triangles.clone() };
     assert!(!FaceBvh::build(&parts.mesh(), &NoProgress).oriented, "inside out");
 }
+
+/// An estimate kept across a move ([`SceneLights::still_holds`]) is the estimate made
+/// afresh there, bit for bit: on `cornell`, after the short box moves, the kept ones and
+/// those made again equal a new [`EdgeErrors`]'s, and both kinds occur.
+#[test]
+fn estimates_kept_across_a_move_equal_estimates_made_afresh() {
+    let scene = edgepoint_scene::builtin::load("cornell").unwrap();
+    let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+    let id = |n: &str| scene.object_id(n).unwrap();
+    let triples: Vec<TripleKey> = ["tallbox", "shortbox"]
+        .iter()
+        .flat_map(|b| ["floor", "back", "redwall", "greenwall", "tallbox", "shortbox"].map(|r| TripleKey { light: 0, blocker: id(b), receiver: id(r) }))
+        .filter(|k| k.blocker != k.receiver)
+        .collect();
+    let mut f = EdgeFinder::new(&scene, &NoProgress);
+    let mut out = Vec::new();
+    let mut kept = EdgeErrors::new();
+    f.frame(&t, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
+    let (before, estimated) = f.errors(&mut kept);
+    assert_eq!(estimated, before.len());
+    for (k, d) in [(0, Vec3::new(0.04, 0.0, -0.03)), (1, Vec3::new(-0.02, 0.0, 0.05))] {
+        let mut moved = t.clone();
+        let o = id(["shortbox", "tallbox"][k]) as usize;
+        moved[o] = Affine3A::from_translation(d) * t[o];
+        f.frame(&moved, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
+        let (carried, dropped) = (kept.carried, kept.dropped);
+        let (after, again) = f.errors(&mut kept);
+        let (fresh, all) = f.errors(&mut EdgeErrors::new());
+        let bits = |v: &[(EdgeSegment, f64)]| v.iter().map(|(e, x)| (e.a.to_array().map(f32::to_bits), e.b.to_array().map(f32::to_bits), x.to_bits())).collect::<Vec<_>>();
+        assert_eq!(bits(&after), bits(&fresh), "move {k}");
+        assert_eq!(all, fresh.len());
+        assert!(kept.carried > carried && kept.dropped > dropped, "move {k}: {} kept, {} dropped", kept.carried - carried, kept.dropped - dropped);
+        assert!(again < all, "move {k}: {again} of {all} estimated again");
+        // Back where they were (the next move starts from `t`): every edge of `t` again.
+        f.frame(&t, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
+        let (back, _) = f.errors(&mut kept);
+        assert_eq!(bits(&back), bits(&before));
+    }
+}
