@@ -55,6 +55,24 @@ pub struct DmeshArgs {
     pub json: bool,
 }
 
+/// The object `name`, or with none the smallest object (by its box's diagonal) of 8
+/// triangles or more: the object the benchmarks move.
+pub fn object_to_move(scene: &edgepoint_scene::Scene, name: Option<&str>) -> Result<usize> {
+    match name {
+        Some(name) => scene.object_id(name).map(|o| o as usize).ok_or_else(|| anyhow::anyhow!("{} has no object {name}", scene.name)),
+        None => (0..scene.objects.len())
+            .filter(|i| scene.objects[*i].mesh.triangles.len() >= 8)
+            .min_by(|i, j| {
+                let d = |k: usize| {
+                    let (lo, hi) = scene.object_bounds(k);
+                    (hi - lo).length()
+                };
+                d(*i).total_cmp(&d(*j))
+            })
+            .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", scene.name)),
+    }
+}
+
 pub fn run(a: DmeshArgs) -> Result<()> {
     let progress = LogProgress::new("dmesh");
     let p = std::path::Path::new(&a.scene);
@@ -99,20 +117,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let eee_segments: usize = mesh.receivers().map(|m| m.segments.iter().filter(|s| matches!(s.generator, edgepoint_server::dmesh::segments::Generator::Eee { .. })).count()).sum();
     let (mesh_bytes, grid_bytes, geometry_bytes) = (mesh.bytes(), grid.bytes(), g.bytes());
     let threads = rayon::current_num_threads();
-    // The moved object.
-    let object = match &a.object {
-        Some(name) => scene.object_id(name).ok_or_else(|| anyhow::anyhow!("{} has no object {name}", a.scene))?,
-        None => (0..scene.objects.len())
-            .filter(|i| scene.objects[*i].mesh.triangles.len() >= 8)
-            .min_by(|i, j| {
-                let d = |k: usize| {
-                    let (lo, hi) = scene.object_bounds(k);
-                    (hi - lo).length()
-                };
-                d(*i).total_cmp(&d(*j))
-            })
-            .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", a.scene))? as u32,
-    };
+    let object = object_to_move(&scene, a.object.as_deref())? as u32;
     let intersection_bytes: usize = mesh.receivers().map(|m| m.traces.iter().map(|t| t.bytes()).sum::<usize>() + m.eee.iter().map(|t| t.bytes()).sum::<usize>()).sum();
     let mut rng = Rng::new(a.seed);
     let mut g = g;
@@ -145,7 +150,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
             // CPU time of the update's parts, summed over threads.
             "cpu_ms": {
                 "own_receivers": stats.own_receivers_ns as f64 / 1e6, "scan": stats.scan_ns as f64 / 1e6,
-                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6, "eee": stats.eee_ns as f64 / 1e6,
+                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6, "eee": stats.eee_ns as f64 / 1e6, "eee_dynamic": stats.eee_dynamic_ns as f64 / 1e6,
                 "arrangement": stats.arrangement_ns as f64 / 1e6, "faces": stats.faces_ns as f64 / 1e6,
             },
         }));

@@ -138,19 +138,7 @@ pub struct Moves {
 
 /// The estimates across `moves.count` slides of the object, for the finder and the mesh.
 fn run_moves(scene: &Scene, triples: &[TripleKey], moves: &Moves) -> Result<(Value, String)> {
-    let object = match &moves.object {
-        Some(name) => scene.object_id(name).ok_or_else(|| anyhow::anyhow!("{} has no object {name}", scene.name))? as usize,
-        None => (0..scene.objects.len())
-            .filter(|i| scene.objects[*i].mesh.triangles.len() >= 8)
-            .min_by(|i, j| {
-                let d = |k: usize| {
-                    let (lo, hi) = scene.object_bounds(k);
-                    (hi - lo).length()
-                };
-                d(*i).total_cmp(&d(*j))
-            })
-            .ok_or_else(|| anyhow::anyhow!("{} has no object of 8 triangles or more", scene.name))?,
-    };
+    let object = crate::dmesh::object_to_move(scene, moves.object.as_deref())?;
     let (lo, hi) = scene.object_bounds(object);
     let step = (hi - lo).length() * moves.step as f32;
     let mut t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();

@@ -82,6 +82,9 @@ pub struct UpdateStats {
     pub recast_ns: u64,
     /// EEE surfaces: static ones re-intersected, dynamic ones found and intersected.
     pub eee_ns: u64,
+    /// Of `eee_ns`, the dynamic ones (found from the moved edges and intersected with every
+    /// blocker): new surfaces, as a full computation makes them.
+    pub eee_dynamic_ns: u64,
     /// 1D visibility and the arrangement.
     pub arrangement_ns: u64,
     /// Face backprojections (kept or redone).
@@ -95,7 +98,7 @@ macro_rules! add_fields {
 impl std::ops::Add for UpdateStats {
     type Output = UpdateStats;
     fn add(self, o: UpdateStats) -> UpdateStats {
-        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, receivers_kept_in_umbra, arrangements_kept, traces_reintersected, traces_untouched, traces_recast, eee_reintersected, eee_untouched, eee_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, eee_ns, arrangement_ns, faces_ns)
+        add_fields!(self, o, receivers_in_motion_volume, receivers_updated, receivers_recomputed, receivers_rebuilt, receivers_kept_in_umbra, arrangements_kept, traces_reintersected, traces_untouched, traces_recast, eee_reintersected, eee_untouched, eee_recast, faces_kept, faces_recomputed, own_receivers_ns, scan_ns, reintersect_ns, recast_ns, eee_ns, eee_dynamic_ns, arrangement_ns, faces_ns)
     }
 }
 
@@ -378,6 +381,7 @@ fn update_eee(r: &super::receiver::Receiver, old: Vec<EeeSurface>, g: &Geometry,
         s.eee_reintersected += 1;
     }
     if !new_moved.is_empty() {
+        let t0 = Instant::now();
         let moved_edges = eee::edges_of(g, new_moved);
         let mut runs = None;
         let (mut first, mut rest) = (Vec::new(), Vec::new());
@@ -408,6 +412,7 @@ fn update_eee(r: &super::receiver::Receiver, old: Vec<EeeSurface>, g: &Geometry,
             eee::surfaces(g, light, r, li as u32, e, &rest, Some(&first), runs, &mut out);
             s.eee_recast += out.len() - before;
         }
+        s.eee_dynamic_ns += ns(t0);
     }
     eee::canonical_order(&mut out);
     out
