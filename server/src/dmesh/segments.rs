@@ -552,25 +552,8 @@ impl Runs {
             return;
         }
         let regions = fan_regions(r, trace);
-        let c = trace.apex;
-        let near = |b: &(DVec3, DVec3)| {
-            if b.0.cmpgt(hi + r.tol).any() || b.1.cmplt(lo - r.tol).any() {
-                return false;
-            }
-            let (mid, ext) = ((b.0 + b.1) * 0.5, (b.1 - b.0) * 0.5);
-            // Near a region when the box reaches across its plane (its extreme heights over
-            // it; half the tolerance to spare for the rounding of the corners' heights
-            // against those of the triangles inside) and reaches inside each of its sides by
-            // more than the tolerance: a triangle whose crossing of the plane stays outside
-            // a side, or within the tolerance of it, hides nothing there (`hidden_in_fan`).
-            regions.iter().flatten().any(|g| {
-                let (d, e) = (g.m.dot(mid - c), g.m.abs().dot(ext));
-                let across = d - e <= -0.5 * r.tol && d + e >= 0.5 * r.tol;
-                across && g.sides[..g.k].iter().all(|(a, n)| n.dot(mid - *a) + n.abs().dot(ext) >= -r.tol)
-            })
-        };
         self.walk(|step| match step {
-            Step::Open(b) => near(b),
+            Step::Open(b) => box_near_fan(r, trace, &regions, (lo, hi), b),
             Step::Triangle(t) => {
                 f(t);
                 true
@@ -637,6 +620,33 @@ impl FanRegion {
         }
         Some(FanRegion { m, sides, k })
     }
+}
+
+/// Whether a triangle inside box `b` may hide part of `trace` (its fan's `regions`, its
+/// [`fan_box`] `(lo, hi)`): `false` only when none can ([`hidden_in_fan`] finds nothing for
+/// any of them).
+fn box_near_fan(r: &Receiver, trace: &Trace, regions: &[Option<FanRegion>; 2], (lo, hi): (DVec3, DVec3), b: &(DVec3, DVec3)) -> bool {
+    if b.0.cmpgt(hi + r.tol).any() || b.1.cmplt(lo - r.tol).any() {
+        return false;
+    }
+    let c = trace.apex;
+    let (mid, ext) = ((b.0 + b.1) * 0.5, (b.1 - b.0) * 0.5);
+    // Near a region when the box reaches across its plane (its extreme heights over it; half
+    // the tolerance to spare for the rounding of the corners' heights against those of the
+    // triangles inside) and reaches inside each of its sides by more than the tolerance: a
+    // triangle whose crossing of the plane stays outside a side, or within the tolerance of
+    // it, hides nothing there (`hidden_in_fan`).
+    regions.iter().flatten().any(|g| {
+        let (d, e) = (g.m.dot(mid - c), g.m.abs().dot(ext));
+        let across = d - e <= -0.5 * r.tol && d + e >= 0.5 * r.tol;
+        across && g.sides[..g.k].iter().all(|(a, n)| n.dot(mid - *a) + n.abs().dot(ext) >= -r.tol)
+    })
+}
+
+/// Whether some triangle inside box `b` may hide part of `trace` (see [`box_near_fan`]):
+/// the update's test of a static trace against the motion volume, finer than the boxes'.
+pub fn fan_may_meet_box(r: &Receiver, trace: &Trace, b: (DVec3, DVec3)) -> bool {
+    box_near_fan(r, trace, &fan_regions(r, trace), fan_box(r, trace), &b)
 }
 
 /// The regions of a trace's fan, as [`hide_in_box`] passes them to [`hidden_in_fan`].

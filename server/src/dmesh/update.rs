@@ -27,7 +27,7 @@
 //! mismatches).
 use super::geometry::{boxes_meet, union_of, Geometry};
 use super::grid::Grid;
-use super::segments::{fan_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
+use super::segments::{fan_box, fan_may_meet_box, hide_in_box, sort_hidden, traces_with, Runs, Silhouettes, TraceVis};
 use super::face::none_can_hide;
 use super::segments::Segment;
 use super::eee::{self, EeeSurface};
@@ -244,8 +244,10 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
         }
         // A surface that does not cross the motion volume (paper 002 §4.1) meets the moved
         // object neither before nor after: its intersection list stays as it is.
+        // Nor does one whose fan the motion volume does not reach across (the test the
+        // intersection applies to a run of blockers' box).
         let fan = fan_box(&receiver, &tv.trace);
-        if !boxes_meet(fan, motion) {
+        if !boxes_meet(fan, motion) || !fan_may_meet_box(&receiver, &tv.trace, motion) {
             out.push(tv);
             s.traces_untouched += 1;
             continue;
