@@ -75,6 +75,52 @@ impl Grid {
         }
     }
 
+    /// The box of voxel `(x, y, z)`, unbounded on the sides where it is a border voxel (a
+    /// triangle moved outside the scene's bounds is listed there).
+    fn voxel_box(&self, v: IVec3) -> (DVec3, DVec3) {
+        let lo = self.lo + self.cell * v.as_dvec3();
+        let hi = lo + self.cell;
+        let inf = DVec3::splat(f64::INFINITY);
+        (DVec3::select(v.cmpeq(IVec3::ZERO), -inf, lo), DVec3::select(v.cmpeq(self.dims - 1), inf, hi))
+    }
+
+    /// Whether triangle `t` (at its position in `g`, where it is listed) is listed in a
+    /// voxel whose box `keep` accepts: what [`Self::query_where`] decides for it.
+    pub fn listed_where(&self, g: &Geometry, t: u32, keep: impl Fn((DVec3, DVec3)) -> bool) -> bool {
+        let (a, b) = self.tri_range(g, t);
+        (a.z..=b.z).any(|z| (a.y..=b.y).any(|y| (a.x..=b.x).any(|x| keep(self.voxel_box(IVec3::new(x, y, z))))))
+    }
+
+    /// [`Self::query`] over the voxels whose box `keep` accepts (a receiver's shaft: a long
+    /// thin shaft meets few of the voxels of its box).
+    pub fn query_where(&self, lo: DVec3, hi: DVec3, keep: impl Fn((DVec3, DVec3)) -> bool, stamp: &mut Vec<u32>, epoch: &mut u32, mut f: impl FnMut(u32)) {
+        if stamp.len() < self.tris {
+            stamp.resize(self.tris, 0);
+        }
+        *epoch = epoch.wrapping_add(1);
+        if *epoch == 0 {
+            stamp.iter_mut().for_each(|s| *s = 0);
+            *epoch = 1;
+        }
+        let (a, b) = self.range(lo, hi);
+        let e = *epoch;
+        for z in a.z..=b.z {
+            for y in a.y..=b.y {
+                for x in a.x..=b.x {
+                    if !keep(self.voxel_box(IVec3::new(x, y, z))) {
+                        continue;
+                    }
+                    for &t in &self.voxels[((z * self.dims.y + y) * self.dims.x + x) as usize] {
+                        if stamp[t as usize] != e {
+                            stamp[t as usize] = e;
+                            f(t);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     /// Calls `f` once for every triangle listed in a voxel the box touches. `stamp` (one
     /// entry per triangle) and `epoch` dedupe across voxels without clearing.
     pub fn query(&self, lo: DVec3, hi: DVec3, stamp: &mut Vec<u32>, epoch: &mut u32, mut f: impl FnMut(u32)) {

@@ -218,11 +218,19 @@ impl Shaft {
 #[allow(clippy::too_many_arguments)] // the grid query's scratch (out, stamp, epoch) is the caller's, reused across receivers
 pub fn shaft_blockers(g: &Geometry, grid: &Grid, light: &LightPlane, r: &Receiver, shaft: &Shaft, out: &mut Vec<u32>, stamp: &mut Vec<u32>, epoch: &mut u32) {
     out.clear();
-    grid.query(shaft.lo, shaft.hi, stamp, epoch, |t| {
+    // Only the voxels the shaft may meet, not every voxel of its box: a triangle listed in
+    // none of them lies wholly outside the shaft (beyond its tolerance) and blocks nothing.
+    grid.query_where(shaft.lo, shaft.hi, |b| shaft.may_meet_box(b, r.tol), stamp, epoch, |t| {
         if is_blocker(g, light, r, shaft, t) {
             out.push(t);
         }
     });
+}
+
+/// Whether [`shaft_blockers`] lists triangle `t` (at its place in `g`, listed in `grid`):
+/// [`is_blocker`], in a voxel the shaft may meet.
+pub fn is_listed_blocker(g: &Geometry, grid: &Grid, light: &LightPlane, r: &Receiver, shaft: &Shaft, t: u32) -> bool {
+    is_blocker(g, light, r, shaft, t) && grid.listed_where(g, t, |b| shaft.may_meet_box(b, r.tol))
 }
 
 /// Whether triangle `t` can block a line from the light to the receiver.

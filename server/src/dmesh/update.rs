@@ -157,7 +157,7 @@ impl DiscontinuityMesh {
                     replaced = true;
                 } else if let Some(m) = slot.as_mut().filter(|m| boxes_meet((m.shaft.lo, m.shaft.hi), motion)) {
                     s.receivers_in_motion_volume = 1;
-                    if let Some(u) = update_receiver(m, new, light, o, motion, b1, &silhouettes[l], &mut s) {
+                    if let Some(u) = update_receiver(m, new, grid, light, o, motion, b1, &silhouettes[l], &mut s) {
                         **m = u;
                         s.receivers_updated = 1;
                         replaced = true;
@@ -189,7 +189,7 @@ impl DiscontinuityMesh {
 /// untouched surfaces, a kept arrangement) it takes out of `m`, which is to be replaced by
 /// the result: moved, not copied and dropped.
 #[allow(clippy::too_many_arguments)] // the move (object, motion volume, new box, silhouettes) and the stats it adds to
-fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), silhouettes: &Silhouettes, s: &mut UpdateStats) -> Option<ReceiverMesh> {
+fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, grid: &Grid, light: &LightPlane, o: u32, motion: (DVec3, DVec3), new_box: (DVec3, DVec3), silhouettes: &Silhouettes, s: &mut UpdateStats) -> Option<ReceiverMesh> {
     let t0 = Instant::now();
     let moved = g.object_tris(o);
     let verts = g.object_vertices(o);
@@ -198,7 +198,7 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, light: &LightPlane, o: u3
     // changes. The object's box against the shaft first (most shafts that meet the motion
     // volume miss the object where it is now), then its triangles one by one.
     let new_moved: Vec<u32> = if m.shaft.may_meet_box(new_box, m.receiver.tol) {
-        moved.clone().filter(|t| super::receiver::is_blocker(g, light, &m.receiver, &m.shaft, *t)).collect()
+        moved.clone().filter(|t| super::receiver::is_listed_blocker(g, grid, light, &m.receiver, &m.shaft, *t)).collect()
     } else {
         Vec::new()
     };
