@@ -9,7 +9,7 @@
 //! A blocker is first clipped to the pyramid from the point to the light (so only what can
 //! block is projected, and nothing behind the point or the light is), then projected and
 //! subtracted from every visible piece ([`crate::polyclip::subtract_convex`]).
-use crate::polyclip::{boxes_overlap, clip, drop_repeated, signed_area2, subtract_convex};
+use crate::polyclip::{bounds, box_overlaps, clip, drop_repeated, signed_area2, subtract_convex};
 use crate::polygon_irradiance::polygon_irradiance;
 use glam::{DVec2, DVec3, Vec3};
 
@@ -170,8 +170,9 @@ impl<'a> Visible<'a> {
         let Some(shadow) = self.project(&t) else { return false };
         let mut out = Vec::with_capacity(self.pieces.len() + 4);
         let mut changed = false;
+        let shadow_box = bounds(&shadow);
         for piece in self.pieces.drain(..) {
-            if boxes_overlap(&piece, &shadow) {
+            if box_overlaps(&piece, shadow_box) {
                 let before = out.len();
                 subtract_convex(&piece, &shadow, self.min_area2, &mut out);
                 // Unchanged when the piece came back whole (one piece of the same area).
