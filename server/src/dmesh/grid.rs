@@ -123,25 +123,8 @@ impl Grid {
 
     /// Calls `f` once for every triangle listed in a voxel the box touches. `stamp` (one
     /// entry per triangle) and `epoch` dedupe across voxels without clearing.
-    pub fn query(&self, lo: DVec3, hi: DVec3, stamp: &mut Vec<u32>, epoch: &mut u32, mut f: impl FnMut(u32)) {
-        if stamp.len() < self.tris {
-            stamp.resize(self.tris, 0);
-        }
-        *epoch = epoch.wrapping_add(1);
-        if *epoch == 0 {
-            stamp.iter_mut().for_each(|s| *s = 0);
-            *epoch = 1;
-        }
-        let (a, b) = self.range(lo, hi);
-        let e = *epoch;
-        self.each(a, b, |v| {
-            for &t in &self.voxels[v] {
-                if stamp[t as usize] != e {
-                    stamp[t as usize] = e;
-                    f(t);
-                }
-            }
-        });
+    pub fn query(&self, lo: DVec3, hi: DVec3, stamp: &mut Vec<u32>, epoch: &mut u32, f: impl FnMut(u32)) {
+        self.query_where(lo, hi, |_| true, stamp, epoch, f);
     }
 
     /// Bytes of the voxel lists.
