@@ -24,6 +24,9 @@ use glam::{Affine3A, Vec3};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+/// Moved boxes kept apart for [`MeshShadows::check_estimates`] before they are merged into one.
+const MAX_UNCHECKED_BOXES: usize = 64;
+
 pub struct MeshShadows {
     geometry: Geometry,
     grid: Grid,
@@ -95,6 +98,12 @@ impl MeshShadows {
             tracing::debug!(object = o, ?stats, "discontinuity mesh updated");
             let boxes = [self.geometry.object_bounds(o as u32), new.object_bounds(o as u32)];
             self.unchecked.extend(boxes);
+            // Moves made while nothing checks (tolerance 0) would pile up: past a few
+            // dozen, their union stands for them all (a larger box only drops more).
+            if self.unchecked.len() > MAX_UNCHECKED_BOXES {
+                let all = self.unchecked.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), b| (lo.min(b.0), hi.max(b.1)));
+                self.unchecked = vec![all];
+            }
             let before = std::mem::replace(&mut self.geometry, new);
             one = (moved == 0).then_some((before, o as u32, boxes));
             self.transforms[o] = *to;
