@@ -381,6 +381,12 @@ impl ShadowFinder {
         (SceneLights::new(&self.lights, &self.index.bvhs, &self.transforms), &self.transforms)
     }
 
+    /// Every stored shadow edge with its estimate as far as `errors` knows it (NaN where not
+    /// estimated yet), estimating nothing.
+    pub fn known_errors(&self, errors: &mut EdgeErrors) -> Vec<(EdgeSegment, f64)> {
+        errors.known(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
+    }
+
     /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
     pub fn estimates_missing(&self, errors: &mut EdgeErrors) -> bool {
         errors.missing(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
@@ -494,6 +500,11 @@ impl EdgeFinder {
     /// See [`ShadowFinder::errors`].
     pub fn errors(&self, errors: &mut EdgeErrors) -> (Vec<(EdgeSegment, f64)>, usize) {
         self.shadows.errors(errors)
+    }
+
+    /// [`ShadowFinder::known_errors`].
+    pub fn known_errors(&self, errors: &mut EdgeErrors) -> Vec<(EdgeSegment, f64)> {
+        self.shadows.known_errors(errors)
     }
 }
 

@@ -706,6 +706,13 @@ impl EdgeErrors {
         store.events_with_edges().any(|((l, _), _, segs)| segs.iter().any(|e| !self.known.contains_key(&key(l, e))))
     }
 
+    /// Every shadow edge of `store` with its error as far as known — kept across moves — and
+    /// NaN where not estimated yet, estimating nothing (in the store's order).
+    pub fn known(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> Vec<(EdgeSegment, f64)> {
+        self.sync(lights, bvhs, transforms);
+        jobs(store, transforms).into_iter().map(|(e, l, _, _)| (e, self.known.get(&key(l, &e)).map_or(f64::NAN, |x| x.error))).collect()
+    }
+
     /// Every shadow edge of `store` with its error (infinite where none can be estimated:
     /// such an edge always stays), in the store's order, and how many were estimated now.
     pub fn update(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> (Vec<(EdgeSegment, f64)>, usize) {

@@ -320,10 +320,16 @@ impl ShadowThread {
                 let tolerance = job.simplify_tolerance;
                 if tolerance > 0.0 {
                     // The estimates of new edges can take longer than the update (seconds
-                    // on `rooms`): every edge goes out first, so shadows show meanwhile.
+                    // on `rooms`): the edges go out first, those whose estimates outlived the
+                    // move decided by them and the others all, so shadows show meanwhile.
                     let with_penumbrae = crate::background::pool().install(|| finder.with_penumbrae());
                     if finder.estimates_missing(&mut errors) {
-                        publish(ShadowResult { segments: with_penumbrae.clone(), stats, simplified: 0, tolerance: 0.0 }, ms);
+                        let known = finder.known_errors(&mut errors);
+                        debug_assert_eq!(with_penumbrae.len(), known.len());
+                        let all: Vec<_> = with_penumbrae.iter().copied().zip(&known).map(|(s, (_, e))| (s, *e)).collect();
+                        let mut segments = Vec::with_capacity(all.len());
+                        let simplified = chosen_shadow_edges(&all, tolerance, &mut segments);
+                        publish(ShadowResult { segments, stats, simplified, tolerance }, ms);
                     }
                     let t = Instant::now();
                     let (all, estimated) = crate::background::pool().install(|| finder.errors(&mut errors));

@@ -461,7 +461,11 @@ fn estimates_kept_across_a_move_equal_estimates_made_afresh() {
         moved[o] = Affine3A::from_translation(d) * t[o];
         f.frame(&moved, scene.camera.eye, None, triples.iter().copied(), 85.0, &mut out);
         let (carried, dropped) = (kept.carried, kept.dropped);
+        // Before estimating: the kept ones known, NaN for exactly those estimated next.
+        let known = f.known_errors(&mut kept);
         let (after, again) = f.errors(&mut kept);
+        assert_eq!(known.iter().filter(|(_, x)| x.is_nan()).count(), again);
+        assert!(known.iter().zip(&after).all(|((a, x), (b, y))| a == b && (x.is_nan() || x.to_bits() == y.to_bits())));
         let (fresh, all) = f.errors(&mut EdgeErrors::new());
         let bits = |v: &[(EdgeSegment, f64)]| v.iter().map(|(e, x)| (e.a.to_array().map(f32::to_bits), e.b.to_array().map(f32::to_bits), x.to_bits())).collect::<Vec<_>>();
         assert_eq!(bits(&after), bits(&fresh), "move {k}");
