@@ -16,12 +16,10 @@ use crate::dmesh::{area_lights_indexed, DiscontinuityMesh, GRID_TRIANGLES_PER_VO
 use crate::edges::mesh_edges::{receivers_shadow_edges, Decisions, MeshEdgeCounts, MeshShadowEdge, Moved, OldDecisions};
 use crate::edges::shadow::daffine;
 use crate::edges::simplify::{self, Estimate, Estimated, Job, Rules, SceneLights};
-use glam::DVec3;
-use std::collections::HashMap;
 use crate::edges::EdgeSegment;
 use edgepoint_scene::Scene;
-use glam::{Affine3A, Vec3};
-use std::collections::BTreeMap;
+use glam::{Affine3A, DVec3, Vec3};
+use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
 /// Moved boxes kept apart for [`MeshShadows::check_estimates`] before they are merged into one.
@@ -161,6 +159,9 @@ impl MeshShadows {
                     at.push(next);
                 }
                 next += 1;
+            }
+            if at.is_empty() {
+                break;
             }
             let jobs: Vec<Job> = at.iter().map(|i| self.edges[*i]).map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
             let (errors, _) = simplify::estimate_over_bands(scene, &jobs, &self.rules, Estimate::FAST);
