@@ -643,10 +643,11 @@ fn box_near_fan(r: &Receiver, trace: &Trace, regions: &[Option<FanRegion>; 2], (
     })
 }
 
-/// Whether some triangle inside box `b` may hide part of `trace` (see [`box_near_fan`]):
-/// the update's test of a static trace against the motion volume, finer than the boxes'.
-pub fn fan_may_meet_box(r: &Receiver, trace: &Trace, b: (DVec3, DVec3)) -> bool {
-    box_near_fan(r, trace, &fan_regions(r, trace), fan_box(r, trace), &b)
+/// Whether some triangle inside box `b` may hide part of `trace` (its [`fan_box`] `fan`;
+/// see [`box_near_fan`]): the update's test of a static trace against the motion volume,
+/// finer than the boxes'.
+pub fn fan_may_meet_box(r: &Receiver, trace: &Trace, fan: (DVec3, DVec3), b: (DVec3, DVec3)) -> bool {
+    box_near_fan(r, trace, &fan_regions(r, trace), fan, &b)
 }
 
 /// The regions of a trace's fan, as [`hide_in_box`] passes them to [`hidden_in_fan`].

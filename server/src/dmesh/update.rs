@@ -247,7 +247,7 @@ fn update_receiver(m: &mut ReceiverMesh, g: &Geometry, grid: &Grid, light: &Ligh
         // Nor does one whose fan the motion volume does not reach across (the test the
         // intersection applies to a run of blockers' box).
         let fan = fan_box(&receiver, &tv.trace);
-        if !boxes_meet(fan, motion) || !fan_may_meet_box(&receiver, &tv.trace, motion) {
+        if !boxes_meet(fan, motion) || !fan_may_meet_box(&receiver, &tv.trace, fan, motion) {
             out.push(tv);
             s.traces_untouched += 1;
             continue;

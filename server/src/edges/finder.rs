@@ -387,10 +387,6 @@ impl ShadowFinder {
         errors.known(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
     }
 
-    /// Whether [`Self::errors`] has edges to estimate (not known to `errors`).
-    pub fn estimates_missing(&self, errors: &mut EdgeErrors) -> bool {
-        errors.missing(&self.store, &self.lights, &self.index.bvhs, &self.transforms)
-    }
 }
 
 /// Both parts on one thread, for tests, benchmarks and single-threaded callers.

@@ -31,10 +31,9 @@ use super::simplify::penumbra_width_of;
 use super::{EdgeKind, EdgeSegment};
 use crate::dmesh::receiver::Receiver;
 use crate::dmesh::face::{none_can_hide, visible_at, visible_in};
-use std::collections::HashMap;
-use crate::dmesh::segments::Runs;
 use crate::dmesh::geometry::Geometry;
-use crate::dmesh::segments::Generator;
+use crate::dmesh::segments::{Generator, Runs};
+use std::collections::HashMap;
 use crate::dmesh::{DiscontinuityMesh, ReceiverMesh};
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use glam::{DVec2, DVec3, Vec3};
@@ -258,7 +257,8 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
     let r = &m.receiver;
     let object = g.object[r.tri as usize];
     let mut hit = Vec::new();
-    let runs = Runs::new(g, &m.blockers, false);
+    // The blockers' runs once the first decision is to be made (none when all are kept).
+    let mut runs = None;
     // The moved object's triangles, for the reuse test (all of them: a superset of those
     // among the blockers before or after, passed over only if each one is).
     let moved: Vec<u32> = old.map_or_else(Vec::new, |(mv, _)| g.object_tris(mv.object).collect());
@@ -288,7 +288,8 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
         out.kept += kept.is_some() as usize;
         let d = kept.unwrap_or_else(|| {
             let Some([ql, qr]) = sides(r, q0, q1) else { return Decision::None };
-            let (ll, lr) = (lighting_in(g, light, r, &runs, ql, &mut hit), lighting_in(g, light, r, &runs, qr, &mut hit));
+            let runs = &*runs.get_or_insert_with(|| Runs::new(g, &m.blockers, false));
+            let (ll, lr) = (lighting_in(g, light, r, runs, ql, &mut hit), lighting_in(g, light, r, runs, qr, &mut hit));
             let across = r.n.cross(p1 - p0).try_normalize().unwrap_or(DVec3::ZERO);
             let penumbra = [(across * width(p0)).as_vec3(), (across * width(p1)).as_vec3()];
             let edge = |kind: EdgeKind, penumbra: [Vec3; 2]| MeshShadowEdge { edge: EdgeSegment { a: p0.as_vec3(), b: p1.as_vec3(), kind, object }, penumbra, light: li, blocker: (s0, s1) };
@@ -298,7 +299,7 @@ fn receiver_edges(m: &ReceiverMesh, g: &Geometry, (li, light): (u32, &LightPlane
                 (Umbra, Penumbra) | (Penumbra, Umbra) => Decision::Umbral(edge(EdgeKind::ShadowUmbral, penumbra)),
                 (Lit, Umbra) | (Umbra, Lit) => Decision::Hard(edge(EdgeKind::ShadowUmbral, [Vec3::ZERO; 2])),
                 (Penumbra, Penumbra) => {
-                    if steep(g, light, r, &runs, mid, q1 - q0, width(r.to3(mid))) {
+                    if steep(g, light, r, runs, mid, q1 - q0, width(r.to3(mid))) {
                         Decision::Steep(edge(EdgeKind::ShadowPenumbral, penumbra))
                     } else {
                         Decision::Smooth

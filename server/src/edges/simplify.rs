@@ -700,12 +700,6 @@ impl EdgeErrors {
         self.transforms = transforms.to_vec();
     }
 
-    /// Whether [`Self::update`] would estimate any edge of `store`.
-    pub fn missing(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> bool {
-        self.sync(lights, bvhs, transforms);
-        store.events_with_edges().any(|((l, _), _, segs)| segs.iter().any(|e| !self.known.contains_key(&key(l, e))))
-    }
-
     /// Every shadow edge of `store` with its error as far as known — kept across moves — and
     /// NaN where not estimated yet, estimating nothing (in the store's order).
     pub fn known(&mut self, store: &ShadowStore, lights: &[Light], bvhs: &[FaceBvh], transforms: &[Affine3A]) -> Vec<(EdgeSegment, f64)> {

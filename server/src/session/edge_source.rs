@@ -323,8 +323,8 @@ impl ShadowThread {
                     // on `rooms`): the edges go out first, those whose estimates outlived the
                     // move decided by them and the others all, so shadows show meanwhile.
                     let with_penumbrae = crate::background::pool().install(|| finder.with_penumbrae());
-                    if finder.estimates_missing(&mut errors) {
-                        let known = finder.known_errors(&mut errors);
+                    let known = crate::background::pool().install(|| finder.known_errors(&mut errors));
+                    if known.iter().any(|(_, e)| e.is_nan()) {
                         debug_assert_eq!(with_penumbrae.len(), known.len());
                         let all: Vec<_> = with_penumbrae.iter().copied().zip(&known).map(|(s, (_, e))| (s, *e)).collect();
                         let mut segments = Vec::with_capacity(all.len());

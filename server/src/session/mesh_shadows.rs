@@ -22,6 +22,14 @@ use glam::{Affine3A, DVec3, Vec3};
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
+/// One receiver's shadow edges with their estimates (paper 003; `None` where not made yet),
+/// and what each of its arrangement edges gave.
+struct ReceiverEdges {
+    edges: Vec<MeshShadowEdge>,
+    errors: Vec<Option<Estimated>>,
+    decisions: Decisions,
+}
+
 /// Moved boxes kept apart for [`MeshShadows::check_estimates`] before they are merged into one.
 const MAX_UNCHECKED_BOXES: usize = 64;
 
@@ -33,16 +41,12 @@ pub struct MeshShadows {
     /// The scene light of each of the mesh's lights.
     scene_light: Vec<u32>,
     /// Each receiver's shadow edges (light, triangle; receivers with no arrangement edge
-    /// left out), and what each of its arrangement edges gave: after a move only the
-    /// receivers whose mesh changed make theirs again, keeping the decisions the moved
-    /// object cannot have changed.
-    by_receiver: BTreeMap<(u32, u32), (Vec<MeshShadowEdge>, Decisions)>,
-    /// All of them in that order (lights × receivers × mesh edges), for the objects at
-    /// `transforms`.
-    edges: Vec<MeshShadowEdge>,
-    /// The edges' estimates (paper 003), in order, where made (and kept across moves).
-    errors: Vec<Option<Estimated>>,
-    /// How many of `errors` are `None`.
+    /// left out), what each of its arrangement edges gave and the edges' estimates: after a
+    /// move only the receivers whose mesh changed make theirs again, keeping the decisions
+    /// the moved object cannot have changed and the estimates of edges made the same. In
+    /// this order (lights × receivers × mesh edges) the edges are published.
+    by_receiver: BTreeMap<(u32, u32), ReceiverEdges>,
+    /// How many edges have no estimate.
     missing: usize,
     /// World boxes (before and after) of the moves since the estimates were last checked
     /// against them: until then none is known to hold.
@@ -62,14 +66,14 @@ impl MeshShadows {
         let geometry = Geometry::from_scene_at(scene, transforms);
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
         let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
-        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), edges: Vec::new(), errors: Vec::new(), missing: 0, unchecked: Vec::new(), rules: Rules::new() };
+        let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), missing: 0, unchecked: Vec::new(), rules: Rules::new() };
         m.refresh_edges(&m.mesh.receiver_ids(), None);
         tracing::info!(
             lights = m.mesh.lights.len(),
             triangles = m.geometry.tris.len(),
             segments = m.mesh.segment_count(),
             faces = m.mesh.face_count(),
-            shadow_edges = m.edges.len(),
+            shadow_edges = m.edge_count(),
             ms = t.elapsed().as_secs_f64() * 1e3,
             "discontinuity mesh built"
         );
@@ -112,7 +116,7 @@ impl MeshShadows {
             changed.dedup();
             let mv = one.as_ref().map(|(old, object, boxes)| Moved { old, object: *object, boxes: *boxes });
             self.refresh_edges(&changed, mv.as_ref());
-            tracing::debug!(objects = moved, receivers_changed = changed.len(), shadow_edges = self.edges.len(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
+            tracing::debug!(objects = moved, receivers_changed = changed.len(), shadow_edges = self.edge_count(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
         }
         moved > 0
     }
@@ -126,14 +130,19 @@ impl MeshShadows {
     /// each with its penumbra, appended to `out`; returns how many were left out. An edge
     /// not estimated yet goes (and every one while a move's estimates are unchecked).
     pub fn published(&self, tolerance: f64, out: &mut Vec<(EdgeSegment, [Vec3; 2])>) -> usize {
-        let all = self.edges.iter().map(|e| (e.edge, e.penumbra));
+        let all = self.by_receiver.values().flat_map(|r| r.edges.iter().zip(&r.errors));
         if tolerance > 0.0 && self.unchecked.is_empty() {
-            let with: Vec<_> = all.zip(self.errors.iter().map(|e| e.map_or(f64::NAN, |e| e.error))).collect();
+            let with: Vec<_> = all.map(|(e, x)| ((e.edge, e.penumbra), x.map_or(f64::NAN, |x| x.error))).collect();
             super::edge_source::chosen_shadow_edges(&with, tolerance, out)
         } else {
-            out.extend(all);
+            out.extend(all.map(|(e, _)| (e.edge, e.penumbra)));
             0
         }
+    }
+
+    /// How many shadow edges the mesh has.
+    fn edge_count(&self) -> usize {
+        self.by_receiver.values().map(|r| r.edges.len()).sum()
     }
 
     /// Whether [`Self::estimate`] has estimates to make or to check.
@@ -150,23 +159,19 @@ impl MeshShadows {
     /// not reach it. Returns how many were estimated.
     pub fn estimate(&mut self, scene: &SceneLights, chunk: usize, stop: impl Fn() -> bool) -> usize {
         self.check_estimates(scene);
+        // Where the estimates are missing, in publishing order.
+        let todo: Vec<((u32, u32), usize)> = self.by_receiver.iter().flat_map(|(k, r)| r.errors.iter().enumerate().filter(|(_, e)| e.is_none()).map(move |(i, _)| (*k, i))).collect();
         let mut n = 0;
-        let mut next = 0;
-        while self.missing > 0 && !stop() {
-            let mut at = Vec::with_capacity(chunk.max(1));
-            while at.len() < chunk.max(1) && next < self.errors.len() {
-                if self.errors[next].is_none() {
-                    at.push(next);
-                }
-                next += 1;
-            }
-            if at.is_empty() {
+        for at in todo.chunks(chunk.max(1)) {
+            if stop() {
                 break;
             }
-            let jobs: Vec<Job> = at.iter().map(|i| self.edges[*i]).map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
+            let jobs: Vec<Job> = at.iter().map(|(k, i)| self.by_receiver[k].edges[*i]).map(|e| (e.edge, self.scene_light[e.light as usize], e.blocker.0, e.blocker.1)).collect();
             let (errors, _) = simplify::estimate_over_bands(scene, &jobs, &self.rules, Estimate::FAST);
-            for (i, e) in at.iter().zip(errors) {
-                self.errors[*i] = Some(e);
+            for ((k, i), e) in at.iter().zip(errors) {
+                if let Some(r) = self.by_receiver.get_mut(k) {
+                    r.errors[*i] = Some(e);
+                }
             }
             self.missing -= at.len();
             n += at.len();
@@ -177,15 +182,15 @@ impl MeshShadows {
     /// Every edge's identity with its estimate's bits, sorted (to compare two meshes'
     /// estimates: tests, the benchmark).
     pub fn keyed_estimates(&self) -> Vec<(EdgeKey, Option<u64>)> {
-        let mut v: Vec<_> = self.edges.iter().zip(&self.errors).map(|(e, x)| (edge_key(e), x.map(|x| x.error.to_bits()))).collect();
+        let mut v: Vec<_> = self.by_receiver.values().flat_map(|r| r.edges.iter().zip(&r.errors)).map(|(e, x)| (edge_key(e), x.map(|x| x.error.to_bits()))).collect();
         v.sort_unstable();
         v
     }
 
     /// Forgets every estimate (to make them all afresh: tests, the benchmark).
     pub fn forget_estimates(&mut self) {
-        self.errors.iter_mut().for_each(|e| *e = None);
-        self.missing = self.errors.len();
+        self.by_receiver.values_mut().for_each(|r| r.errors.iter_mut().for_each(|e| *e = None));
+        self.missing = self.edge_count();
     }
 
     /// Checks the estimates kept across moves against the moved boxes (against `scene` at
@@ -198,39 +203,44 @@ impl MeshShadows {
             return 0;
         }
         let boxes = std::mem::take(&mut self.unchecked);
-        self.errors.par_iter_mut().for_each(|e| {
-            if e.is_some_and(|x| !scene.still_holds(&x, &boxes)) {
-                *e = None;
-            }
-        });
-        let before = self.missing;
-        self.missing = self.errors.iter().filter(|e| e.is_none()).count();
-        self.missing - before
+        let mut receivers: Vec<&mut ReceiverEdges> = self.by_receiver.values_mut().collect();
+        let dropped: usize = receivers
+            .par_iter_mut()
+            .map(|r| {
+                let mut n = 0;
+                for e in r.errors.iter_mut().filter(|e| e.is_some_and(|x| !scene.still_holds(&x, &boxes))) {
+                    *e = None;
+                    n += 1;
+                }
+                n
+            })
+            .sum();
+        self.missing += dropped;
+        dropped
     }
 
     /// Makes the shadow edges of `receivers` again (the others' are as they were), after
     /// `moved` moved if given. An edge made the same as before keeps its estimate, to be
     /// checked against the move ([`Self::estimate`]).
     fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>) {
-        let known: HashMap<EdgeKey, Estimated> = self.edges.iter().zip(&self.errors).filter_map(|(e, x)| Some((edge_key(e), (*x)?))).collect();
         let (mut counts, mut kept) = (MeshEdgeCounts::default(), 0);
         let by = &self.by_receiver;
         let own = moved.map(|m| m.old.object_tris(m.object));
-        let old = |(l, t): (u32, u32)| by.get(&(l, t)).filter(|_| !own.as_ref().is_some_and(|o| o.contains(&t))).map(|e| &e.1);
+        let old = |(l, t): (u32, u32)| by.get(&(l, t)).filter(|_| !own.as_ref().is_some_and(|o| o.contains(&t))).map(|e| &e.decisions);
         let made = receivers_shadow_edges(&self.mesh, &self.geometry, receivers, moved.map(|m| (m, &old as &OldDecisions<'_>)));
         for (r, e) in receivers.iter().zip(made) {
             counts = counts + e.counts;
             kept += e.kept;
-            if e.decisions.is_empty() {
-                self.by_receiver.remove(r);
-            } else {
-                self.by_receiver.insert(*r, (e.edges, e.decisions));
+            // The receiver's edges made the same as before keep their estimates.
+            let before = self.by_receiver.remove(r);
+            let known: HashMap<EdgeKey, Estimated> = before.iter().flat_map(|b| b.edges.iter().zip(&b.errors)).filter_map(|(e, x)| Some((edge_key(e), (*x)?))).collect();
+            self.missing -= before.map_or(0, |b| b.errors.iter().filter(|x| x.is_none()).count());
+            if !e.decisions.is_empty() {
+                let errors: Vec<Option<Estimated>> = e.edges.iter().map(|x| known.get(&edge_key(x)).copied()).collect();
+                self.missing += errors.iter().filter(|x| x.is_none()).count();
+                self.by_receiver.insert(*r, ReceiverEdges { edges: e.edges, errors, decisions: e.decisions });
             }
         }
-        self.edges.clear();
-        self.edges.extend(self.by_receiver.values().flat_map(|e| e.0.iter().copied()));
-        self.errors = self.edges.iter().map(|e| known.get(&edge_key(e)).copied()).collect();
-        self.missing = self.errors.iter().filter(|e| e.is_none()).count();
         tracing::debug!(receivers = receivers.len(), decisions_kept = kept, ?counts, "mesh shadow edges made");
     }
 }
