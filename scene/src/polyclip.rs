@@ -78,6 +78,30 @@ pub fn drop_repeated(poly: &mut Vec<DVec2>, tol: f64) {
     *poly = kept;
 }
 
+/// The convex hull, counter-clockwise (Andrew's monotone chain); collinear points dropped.
+pub fn convex_hull(mut p: Vec<DVec2>) -> Vec<DVec2> {
+    p.sort_unstable_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
+    let mut h: Vec<DVec2> = Vec::with_capacity(2 * p.len());
+    // The lower chain left to right, then the upper one back.
+    for pass in 0..2 {
+        let start = h.len();
+        for i in 0..p.len() {
+            let x = if pass == 0 { p[i] } else { p[p.len() - 1 - i] };
+            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], x) <= 0.0 {
+                h.pop();
+            }
+            h.push(x);
+        }
+        h.pop();
+    }
+    h
+}
+
 /// Twice the signed area of a 2D polygon (positive when counter-clockwise).
 pub fn signed_area2(poly: &[DVec2]) -> f64 {
     let n = poly.len();

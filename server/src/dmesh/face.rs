@@ -30,8 +30,9 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
     hit.clear();
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
     let pyramid = pyramid_box(&vis);
+    let mut solids = Vec::new();
     for &t in blockers {
-        if !occlude_by(g, &mut vis, pyramid, t, hit) {
+        if !occlude_by(g, &mut vis, pyramid, t, hit, &mut solids) {
             break;
         }
     }
@@ -41,9 +42,37 @@ pub fn visible_at<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, blocker
 /// One blocker's step of [`visible_at`] and [`visible_in`]: `t` clips the visible part
 /// unless it is passed over, and is noted in `hit` if it hid something. Whether some of
 /// the light is still visible (else the loop ends).
-fn occlude_by(g: &Geometry, vis: &mut Visible, pyramid: (DVec3, DVec3), t: u32, hit: &mut Vec<u32>) -> bool {
+///
+/// A triangle of a convex solid ([`solid::Solids::convex`]) that is not passed over brings
+/// its whole solid's shadow, subtracted once as one convex polygon (the hull of its corners'
+/// shadows: the union of its triangles' shadows, see [`Visible::convex_shadow`]), and the
+/// solid's other triangles are skipped; `solids` notes per point each solid met and whether
+/// it was projected whole. (A face under a chair subtracted each of its boxes' front
+/// triangles, two to six a box, each cutting the pieces further; under a ball, hundreds.)
+/// A solid with a corner not between the point and the light is occluded triangle by
+/// triangle, as every other blocker.
+fn occlude_by(g: &Geometry, vis: &mut Visible, pyramid: (DVec3, DVec3), t: u32, hit: &mut Vec<u32>, solids: &mut Vec<(u32, bool)>) -> bool {
+    let convex = g.solids.convex_component(t).map(|c| (c, solids.iter().find(|s| s.0 == c).map(|s| s.1)));
+    // A solid subtracted whole already (and some light is left: else the walk had ended).
+    if matches!(convex, Some((_, Some(true)))) {
+        return true;
+    }
     let tri = g.tri(t);
-    if !passed_over(g, vis, pyramid, t, &tri) && vis.occlude(tri) {
+    if passed_over(g, vis, pyramid, t, &tri) {
+        return !vis.is_empty();
+    }
+    // The solid's first triangle not passed over: projected whole if it can be.
+    if let Some((c, None)) = convex {
+        let shadow = vis.convex_shadow(g.solids.corners[c as usize].iter().map(|v| g.pos[*v as usize]));
+        solids.push((c, shadow.is_ok()));
+        if let Ok(shadow) = shadow {
+            if shadow.is_some_and(|s| vis.subtract(&s)) {
+                hit.push(t);
+            }
+            return !vis.is_empty();
+        }
+    }
+    if vis.occlude(tri) {
         hit.push(t);
     }
     !vis.is_empty()
@@ -59,6 +88,7 @@ pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &
     hit.clear();
     let mut vis = Visible::new(light, r.to3(q).as_vec3(), r.n.as_vec3())?;
     let pyramid = pyramid_box(&vis);
+    let mut solids = Vec::new();
     runs.walk(|step| match step {
         // The box grown by far more than the rounding of a corner's height over a side or
         // an end against its triangles' own (`passes_over` on a triangle that touches a
@@ -68,7 +98,7 @@ pub fn visible_in<'a>(g: &Geometry, light: &'a LightPlane, r: &Receiver, runs: &
             let pad = 1e-12 * (b.0.abs().max(b.1.abs()).max_element() + 1.0);
             boxes_meet(*b, pyramid) && !vis.passes_over_box((b.0 - pad, b.1 + pad))
         }
-        Step::Triangle(t) => occlude_by(g, &mut vis, pyramid, t, hit),
+        Step::Triangle(t) => occlude_by(g, &mut vis, pyramid, t, hit, &mut solids),
     });
     Some(vis)
 }

@@ -606,6 +606,65 @@ fn receivers_culled_in_their_own_umbra_receive_nothing() {
     assert!(culled > 20, "{culled} receivers culled, {points} points");
 }
 
+/// Closed components count as convex exactly when no edge folds inward: a box turned every
+/// way, the random scenes' tetrahedra and `rooms`' furniture boxes and balls are; an L-shaped
+/// prism (one closed surface) is not. And the backprojection that subtracts a convex solid's
+/// shadow whole ([`face::visible_at`]) leaves what its triangles leave one by one, at random
+/// floor points of random scenes, many of them in a tetrahedron's penumbra.
+#[test]
+fn convex_solids_are_found_and_their_whole_shadows_equal_their_triangles() {
+    let mut r = Rng::new(43);
+    let rot = glam::DQuat::from_axis_angle(DVec3::new(0.3, -0.8, 0.5).normalize(), 1.1);
+    let cube: Vec<DVec3> = (0..8).map(|i| rot * DVec3::new((i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64) + DVec3::new(5.0, 1.0, -3.0)).collect();
+    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let cube_tris: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+    // An L in (x, z) extruded along y: top fan, bottom fan reversed, sides.
+    let l2 = [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)];
+    let l_pos: Vec<DVec3> = [0.0, 1.0].iter().flat_map(|y| l2.iter().map(move |(x, z)| DVec3::new(*x, *y, *z))).collect();
+    let mut l_tris: Vec<[u32; 3]> = (1..5).flat_map(|i| [[6, 6 + i, 7 + i], [0, i + 1, i]]).collect();
+    l_tris.extend((0..6u32).flat_map(|i| {
+        let j = (i + 1) % 6;
+        [[i, j, 6 + j], [i, 6 + j, 6 + i]]
+    }));
+    let g = Geometry::from_objects(&[(cube, cube_tris), (l_pos, l_tris)]);
+    let kind = |o: u32| g.object_tris(o).map(|t| g.solids.convex_component(t).is_some()).collect::<Vec<_>>();
+    assert!(g.object_tris(1).all(|t| g.solids.component[t as usize] != solid::OPEN), "the L is closed");
+    assert!(kind(0).iter().all(|k| *k) && kind(1).iter().all(|k| !*k), "cube {:?}, L {:?}", kind(0), kind(1));
+    let rooms = Geometry::from_scene(&edgepoint_scene::builtin::load("rooms").unwrap());
+    let scene = edgepoint_scene::builtin::load("rooms").unwrap();
+    for name in ["chair4a", "table2", "ball4"] {
+        let o = scene.objects.iter().position(|x| x.name == name).unwrap() as u32;
+        assert!(rooms.object_tris(o).all(|t| rooms.solids.convex_component(t).is_some()), "{name}'s parts are convex solids");
+    }
+    let (mut points, mut whole, mut partial) = (0, 0, 0);
+    for _ in 0..60 {
+        let (g, light) = random_scene(&mut r);
+        let tet = g.object_tris(g.tri_start.len() as u32 - 1);
+        assert!(tet.clone().all(|t| g.solids.convex_component(t).is_some()), "a tetrahedron is convex");
+        let rc = receiver::Receiver::new(&g, 0, light.lift(light.corners[0]), tolerance(&g)).unwrap();
+        let blockers: Vec<u32> = (2..g.tris.len() as u32).collect();
+        for _ in 0..30 {
+            let q = DVec2::new(3.0 * r.f64() - 1.5, 3.0 * r.f64() - 1.5);
+            let p = rc.to3(q);
+            let Some(mut each) = Visible::new(&light, p.as_vec3(), rc.n.as_vec3()) else { continue };
+            let free = each.irradiance();
+            for t in &blockers {
+                each.occlude(g.tri(*t));
+            }
+            let mut hit = Vec::new();
+            let e = face::visible_at(&g, &light, &rc, &blockers, q, &mut hit).map_or(0.0, |v| v.irradiance());
+            assert!((e - each.irradiance()).abs() <= 1e-12 * free, "at {p}: {e} vs {} triangle by triangle", each.irradiance());
+            points += 1;
+            let v = Visible::new(&light, p.as_vec3(), rc.n.as_vec3()).unwrap();
+            if let Ok(Some(_)) = v.convex_shadow(tet.clone().flat_map(|t| g.tri(t))) {
+                whole += hit.iter().any(|t| tet.contains(t)) as u32;
+            }
+            partial += (e > 0.01 * free && e < 0.99 * free) as u32;
+        }
+    }
+    assert!(points > 1200 && whole > 80 && partial > 200, "{points} points, {whole} with a tetrahedron's shadow subtracted whole, {partial} in penumbra");
+}
+
 /// The receivers of the scene tests: the triangles whose centroid lies in the moved object's
 /// box grown by `grow` of its diagonal on every side (the receivers its moves can reach),
 /// every k-th of them so that at most `cap` remain.

@@ -20,6 +20,7 @@
 //!    lights only: for a point light the 18 shadow rays cost less than the test.
 use super::{Band, SceneLights};
 use edgepoint_scene::geometry::ray_triangle;
+pub use edgepoint_scene::polyclip::convex_hull;
 use edgepoint_scene::polyclip::{signed_area2, subtract_convex};
 use edgepoint_scene::Light;
 use glam::{DVec2, DVec3};
@@ -212,25 +213,3 @@ impl SceneLights<'_> {
     }
 }
 
-/// The convex hull, counter-clockwise (Andrew's monotone chain); collinear points dropped.
-pub fn convex_hull(mut p: Vec<DVec2>) -> Vec<DVec2> {
-    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
-    let mut h: Vec<DVec2> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = h.len();
-        let it: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 { Box::new(p.iter()) } else { Box::new(p.iter().rev()) };
-        for &x in it {
-            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], x) <= 0.0 {
-                h.pop();
-            }
-            h.push(x);
-        }
-        h.pop();
-    }
-    h
-}
