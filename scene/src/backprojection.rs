@@ -204,6 +204,26 @@ impl<'a> Visible<'a> {
         Ok((q.len() >= 3 && signed_area2(&q) > self.min_area2).then_some(q))
     }
 
+    /// The shadow on the light's plane of a convex closed solid with triangles `tris` that
+    /// does not hold the point: the hull of its triangles' shadows ([`Self::project`]: each
+    /// clipped to the pyramid and between the point and the light). The lines from the point
+    /// that meet the solid form a convex cone, and every one enters the solid through a
+    /// triangle, so the union of the triangles' shadows is that cone's trace on the light's
+    /// plane, convex: its hull. Unlike [`Self::convex_shadow`] the solid may reach below the
+    /// point's height (a box standing on the floor the point lies on). `None` when nothing of
+    /// it has area.
+    pub fn solid_shadow(&self, tris: impl IntoIterator<Item = [DVec3; 3]>) -> Option<Vec<DVec2>> {
+        let mut q = Vec::new();
+        for t in tris {
+            if let Some(s) = self.project(&t) {
+                q.extend(s);
+            }
+        }
+        let mut q = convex_hull(q);
+        drop_repeated(&mut q, self.min_length);
+        (q.len() >= 3 && signed_area2(&q) > self.min_area2).then_some(q)
+    }
+
     /// Removes the convex counter-clockwise polygon `shadow` (on the light's plane, in its
     /// (u, v) coordinates, no repeated corners) from the visible part: what
     /// [`Self::occlude`] does with a triangle's shadow. Returns whether it hid anything.

@@ -1039,13 +1039,14 @@ fn floor_shade(bvh: &crate::edges::face_bvh::FaceBvh, t: &glam::Affine3A, light:
 #[test]
 fn a_move_drops_the_points_whose_point_light_shadow_it_changed_and_keeps_the_others_fresh() {
     use crate::edges::face_bvh::FaceBvh;
-    use crate::session::move_shadows::MoveQuery;
+    use crate::session::move_shadows::{Exact, MoveQuery};
     let (w, h) = (48u32, 48u32);
     // Looking down at the floor y = 0 from above.
     let cam = Camera { eye: Vec3::new(0.0, 5.0, 0.0), target: Vec3::ZERO, up: Vec3::NEG_Z, fov_y_degrees: 50.0 }.frame(w, h);
     let quad = [Vec3::new(-0.5, 1.0, -0.5), Vec3::new(0.5, 1.0, -0.5), Vec3::new(0.5, 1.0, 0.5), Vec3::new(-0.5, 1.0, 0.5)];
     let mesh = edgepoint_scene::Mesh::from_triangles(quad.to_vec(), vec![[0, 1, 2], [0, 2, 3]], &edgepoint_scene::NoProgress);
     let bvh = FaceBvh::build(&mesh, &edgepoint_scene::NoProgress);
+    let exact = Exact { bvh: FaceBvh::build(&mesh, &edgepoint_scene::NoProgress), solids: None };
     let light = Vec3::new(0.0, 2.0, 0.0);
     let (from, to) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.4, 0.0, 0.0)));
     // One point per pixel, shaded exactly with the blocker in its old place.
@@ -1087,7 +1088,7 @@ fn a_move_drops_the_points_whose_point_light_shadow_it_changed_and_keeps_the_oth
     let (wrong, stale, _, _) = judge(&mut before);
     assert!(wrong > 200 && stale > wrong + 100, "before: {wrong} wrong points shown, {stale} stale");
     let mut c = filled();
-    let r = c.reshadow(region, &lights, &MoveQuery::new(Some(&bvh), &from, &to, &lights));
+    let r = c.reshadow(region, &lights, &MoveQuery::new(Some(&exact), &mesh, &from, &to, &lights, &[]));
     let (wrong, stale, shown, in_shadow) = judge(&mut c);
     assert_eq!((wrong, stale), (0, 0), "no point shaded under the blocker's old place is shown, and the others stay fresh");
     // The floor's shadows of the old and new place are squares of side 2 (the blocker's 1,
@@ -1103,10 +1104,79 @@ fn a_move_drops_the_points_whose_point_light_shadow_it_changed_and_keeps_the_oth
     assert_eq!(c.len() + r.dropped as usize, (w * h) as usize);
     assert!(shown > (w * h) as usize * 3 / 4);
     assert!(in_shadow > 100, "{in_shadow} points in the new shadow are kept");
-    // An area light: no exact answer, the points it may shadow are aged, none dropped.
+    // An area light without its polygon: no exact answer, the points it may shadow are
+    // aged, none dropped.
     let area = [LightBound { center: light, radius: 0.05 }];
     let before = c.len();
-    let r = c.reshadow(region, &area, &MoveQuery::new(Some(&bvh), &to, &from, &area));
+    let r = c.reshadow(region, &area, &MoveQuery::new(Some(&exact), &mesh, &to, &from, &area, &[]));
     assert_eq!((r.dropped, c.len()), (0, before));
     assert!(r.stale as usize > expected as usize, "{} aged", r.stale);
+}
+
+/// The exact shading of a floor point under a square area light (side 0.6 at height 2,
+/// facing down) with the square blocker placed by `t`: the fraction of the light's
+/// irradiance left, from the backprojection with the blocker's two triangles.
+fn floor_shade_area(mesh: &edgepoint_scene::Mesh, t: &glam::Affine3A, light: &edgepoint_scene::backprojection::LightPlane, p: Vec3) -> Vec3 {
+    use edgepoint_scene::backprojection::Visible;
+    let free = Visible::new(light, p, Vec3::Y).map_or(0.0, |v| v.irradiance());
+    let left = Visible::new(light, p, Vec3::Y).map_or(0.0, |mut v| {
+        for f in 0..mesh.triangles.len() {
+            v.occlude(mesh.triangle(f).map(|x| t.transform_point3(x).as_dvec3()));
+        }
+        v.irradiance()
+    });
+    Vec3::splat((left / free) as f32)
+}
+
+/// An area light's soft shadow, moved: the blocker of the point-light test slides under a
+/// square light. After the move no point shaded under the old shadow is shown where its
+/// shading is now wrong (those were the old soft shadow's dark speckles), every point kept
+/// is fresh and right for the new place, and the points outside the object's penumbrae in
+/// both places (lit in both, or in both umbrae) are kept.
+#[test]
+fn a_move_drops_the_points_whose_area_light_shading_it_changed_and_keeps_the_others_fresh() {
+    use crate::edges::face_bvh::FaceBvh;
+    use crate::session::move_shadows::{convex_solids, Exact, MoveQuery};
+    use edgepoint_scene::backprojection::LightPlane;
+    let (w, h) = (48u32, 48u32);
+    let cam = Camera { eye: Vec3::new(0.0, 5.0, 0.0), target: Vec3::ZERO, up: Vec3::NEG_Z, fov_y_degrees: 50.0 }.frame(w, h);
+    // A slab (a closed box) 1 × 0.02 × 1 at height 1.
+    let slab = edgepoint_scene::builtin::shapes::cuboid(Vec3::new(-0.5, 0.99, -0.5), Vec3::new(0.5, 1.01, 0.5));
+    let exact = Exact { bvh: FaceBvh::build(&slab, &edgepoint_scene::NoProgress), solids: convex_solids(&slab) };
+    assert_eq!(exact.solids.as_ref().map(|s| s.len()), Some(1), "a box is one convex solid");
+    let a = 0.3f32;
+    let corners = vec![Vec3::new(-a, 2.0, -a), Vec3::new(a, 2.0, -a), Vec3::new(a, 2.0, a), Vec3::new(-a, 2.0, a)];
+    let plane = LightPlane::new(&corners).unwrap();
+    assert!(plane.n.y < 0.0, "the light faces down");
+    let (from, to) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.4, 0.0, 0.0)));
+    let mut c = cache(w, h, 2.0);
+    let mut rng = Rng(13);
+    for y in 0..h {
+        for x in 0..w {
+            let (o, d) = cam.ray(x as f32 + rng.unit(), y as f32 + rng.unit());
+            let p = o + d * (-o.y / d.y);
+            assert!(c.insert(&at(hit(p, floor_shade_area(&slab, &from, &plane, p), 7), x, y)));
+        }
+    }
+    let lights = [LightBound { center: Vec3::new(0.0, 2.0, 0.0), radius: a * std::f32::consts::SQRT_2 }];
+    let areas = [Some(plane.clone())];
+    let region = (Vec3::new(-0.5, 0.99, -0.5), Vec3::new(0.9, 1.01, 0.5));
+    let r = c.reshadow(region, &lights, &MoveQuery::new(Some(&exact), &slab, &from, &to, &lights, &areas));
+    frame(&mut c, &cam);
+    let pi = c.point_image();
+    let (mut shown, mut dark, mut lit) = (0, 0, 0);
+    for i in 0..(w * h) as usize {
+        if pi.point[i] == NO_POINT {
+            continue;
+        }
+        let want = floor_shade_area(&slab, &to, &plane, c.point(pi.point[i]).unwrap().position);
+        assert!((pi.color[i] - want).abs().max_element() < 1e-5, "pixel {i}: shown {} but {} in the new place", pi.color[i], want);
+        assert!(pi.age[i] < STALE_AGE, "pixel {i}: stale");
+        shown += 1;
+        dark += usize::from(want.x < 1e-6);
+        lit += usize::from(want.x > 1.0 - 1e-6);
+    }
+    assert_eq!(r.stale, 0, "an exact answer everywhere");
+    assert!(r.dropped > 100, "{} dropped", r.dropped);
+    assert!(dark > 20 && lit > (w * h) as usize / 2 && shown > (w * h) as usize / 2, "{shown} shown: {dark} in both umbrae, {lit} lit in both");
 }

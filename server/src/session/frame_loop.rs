@@ -20,7 +20,7 @@ use super::settings::{camera_from_wire, camera_to_wire, overlay_to_wire, resolve
 use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
-use super::move_shadows::{MoveQuery, MoveShadows};
+use super::move_shadows::{place_solids, MoveQuery, MoveShadows, PlacedSolids};
 use crate::render_cache::reshadow::{worst_change, ShadowChange};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
@@ -220,8 +220,11 @@ pub(super) struct FrameLoop {
     /// Recent moves, newest last: a sample shaded before one of them arrives stale, or is
     /// dropped where the move changed its shadow from a point light ([`Self::shading_since`]).
     recent_moves: std::collections::VecDeque<RecentMove>,
-    /// The moved objects' face hierarchies, for exact point-light shadow tests.
+    /// The moved objects' face hierarchies and convex solids, for exact shadow tests.
     move_shadows: MoveShadows,
+    /// Per object made of convex solids that has moved: those solids where it is now (the
+    /// exact area-light test; a sample shaded before a move compares its place then with it).
+    placed: Vec<Option<Arc<PlacedSolids>>>,
     cache: RenderCache,
     /// The exact primary visibility of the frame: what reprojection culls against.
     visibility: Visibility,
@@ -307,7 +310,8 @@ impl FrameLoop {
             normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
             lights: p.scene.lights.iter().map(light_bound).collect(),
             recent_moves: std::collections::VecDeque::new(),
-            move_shadows: MoveShadows::new(objects),
+            move_shadows: MoveShadows::new(&p.scene),
+            placed: vec![None; objects],
             cache,
             visibility: Visibility::new(p.width, p.height),
             epi: Epi::new(p.width, p.height),
@@ -708,20 +712,31 @@ impl FrameLoop {
         self.last_move_epoch = self.epoch;
         // The object's points go with it (their shading is aged: it was computed in the old
         // place). Of the points it can shadow, in its old place or its new one, those whose
-        // shadow from a point light it changed are dropped (wrong now), those it may have
-        // changed (area lights) are aged (DESIGN.md "Motion"): prioritized sampling
-        // re-shades them first. The others are as right as before.
+        // shadow it changed (from a point light: its segment blocked in one place only; from
+        // an area light: the object hiding part of it in either place, or all in one only)
+        // are dropped (wrong now): prioritized sampling re-shades them first (DESIGN.md
+        // "Motion"). Objects without an exact test age them instead. The others are as right
+        // as before.
         self.cache.move_object(id, &from, &t);
         let bounds = self.scene.objects[id as usize].mesh.bounds;
         let (a, b) = (transformed_box(&from, bounds), transformed_box(&t, bounds));
         let region = (a.0.min(b.0), a.1.max(b.1));
         self.move_shadows.prepare(&self.scene, id);
-        let query = MoveQuery::new(self.move_shadows.get(id), &from, &t, &self.lights);
+        let exact = self.move_shadows.get(id);
+        let mesh = &self.scene.objects[id as usize].mesh;
+        // The object's solids where it was (kept from its last move) and where it is now.
+        let solids = exact.and_then(|e| e.solids.as_ref()).map(|s| {
+            let before = self.placed[id as usize].clone().unwrap_or_else(|| Arc::new(place_solids(mesh, s, &from)));
+            (before, Arc::new(place_solids(mesh, s, &t)))
+        });
+        self.placed[id as usize] = solids.as_ref().map(|s| s.1.clone());
+        let placed_from = solids.as_ref().map(|s| s.0.clone());
+        let query = MoveQuery::placed(exact, &from, &t, solids, &self.lights, self.move_shadows.areas());
         self.counters.shadow_changed += self.cache.reshadow(region, &self.lights, &query).dropped as u64;
         if self.recent_moves.len() >= RECENT_MOVES {
             self.recent_moves.pop_front();
         }
-        self.recent_moves.push_back(RecentMove { epoch: self.epoch, object: id, from, region });
+        self.recent_moves.push_back(RecentMove { epoch: self.epoch, object: id, from, region, placed_from });
     }
 
     /// Drains answers from the workers into the cache (with those already taken); returns
@@ -832,11 +847,12 @@ impl FrameLoop {
     }
 
     /// What the moves since `epoch` did to the shadows at `p`, a point on an object that has
-    /// not moved since: [`ShadowChange::Changed`] where an object that moved blocks a point
-    /// light's segment in its place at `epoch` and not now, or now and not then (exact, with
-    /// the object's triangles); [`ShadowChange::Unknown`] where a move swept a box a shadow
-    /// ray toward another light can cross, or for an object without an exact test, or when
-    /// the moves since `epoch` are no longer all remembered.
+    /// not moved since: [`ShadowChange::Changed`] where an object that moved shadows it
+    /// differently in its place at `epoch` and now (exact, with the object's triangles: a
+    /// point light's segment blocked in one place only; an area light partly hidden by the
+    /// object's convex solids in either place, or wholly in one only);
+    /// [`ShadowChange::Unknown`] for an object without an exact test, or when the moves since
+    /// `epoch` are no longer all remembered.
     fn shading_since(&self, epoch: u64, p: glam::Vec3) -> ShadowChange {
         if self.recent_moves.front().is_none_or(|m| m.epoch > epoch + 1) && epoch < self.last_move_epoch {
             return ShadowChange::Unknown;
@@ -848,7 +864,9 @@ impl FrameLoop {
             if since().take(k).any(|e| e.object == m.object) {
                 continue;
             }
-            let query = MoveQuery::new(self.move_shadows.get(m.object), &m.from, &self.transforms[m.object as usize], &self.lights);
+            let o = m.object as usize;
+            let solids = m.placed_from.clone().zip(self.placed[o].clone());
+            let query = MoveQuery::placed(self.move_shadows.get(m.object), &m.from, &self.transforms[o], solids, &self.lights, self.move_shadows.areas());
             // A segment that misses every box the object swept since then cannot have
             // changed (both its places are in them): no exact test needed.
             let swept = (0..self.lights.len()).filter(|&l| since().filter(|e| e.object == m.object).any(|e| self.lights[l].may_shadow(p, e.region)));
@@ -983,7 +1001,7 @@ fn normal_matrix(t: &glam::Affine3A) -> glam::Mat3A {
 const RECENT_MOVES: usize = 64;
 
 /// One object move as samples shaded before it need it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct RecentMove {
     epoch: u64,
     object: u32,
@@ -991,6 +1009,8 @@ struct RecentMove {
     from: glam::Affine3A,
     /// The world box it swept (old and new place).
     region: (glam::Vec3, glam::Vec3),
+    /// Its convex solids placed before the move, if it is made of them.
+    placed_from: Option<Arc<PlacedSolids>>,
 }
 
 /// A light as the shadow tests see it: every emitting point within a sphere.

@@ -6,14 +6,28 @@
 //! meeting one of the object's triangles. A rigid move leaves the triangles as they are in
 //! object space, so the test runs there, against the object's face hierarchy
 //! ([`FaceBvh`], built once per object at its first move), with the segment taken into
-//! object space by the inverse of each transform. Area lights get no exact answer
-//! ([`ShadowChange::Unknown`]): their points are marked stale as before.
+//! object space by the inverse of each transform.
+//!
+//! An area light's shading at `p` depends on the part of the light visible from `p` (paper
+//! 002 §1's backprojection). The object alone hides nothing of it, part of it, or all of it
+//! ([`hidden_by`]). Hiding nothing in both places, or all of it in both (the light
+//! contributes nothing either way), the point's shading is unchanged; otherwise it changed
+//! — also where the object's shadow merely moved within the penumbra — and the point is
+//! dropped. (Before, every point the swept box could shadow was marked stale and shown until
+//! re-shaded: where the old soft shadow lay, its dark points stayed as speckles for 10–20
+//! frames.) The test is exact and cheap for objects made of convex closed solids (boxes,
+//! spheres, a chair's parts: each solid's shadow is one convex polygon, subtracted once);
+//! other objects' points are marked stale as before (a torus's hundreds of triangles per
+//! point made a frame in motion take seconds).
 use crate::edges::face_bvh::FaceBvh;
 use crate::render_cache::reshadow::{ShadowChange, ShadowQuery};
 use crate::render_cache::{segment_hits_box, LightBound};
+use edgepoint_scene::backprojection::{LightPlane, Visible};
+use crate::dmesh::geometry::Geometry;
 use edgepoint_scene::geometry::ray_triangle;
-use edgepoint_scene::{NoProgress, Scene};
-use glam::{Affine3A, Vec3};
+use edgepoint_scene::{Light, NoProgress, Scene};
+use glam::{Affine3A, DVec3, Vec3};
+use std::sync::Arc;
 
 /// Objects with more triangles get no exact test (their moves mark points stale, as
 /// before): the hierarchy is built on the frame thread at the object's first move, which
@@ -25,28 +39,67 @@ pub const MAX_EXACT_TRIANGLES: usize = 1 << 16;
 /// itself is not a blocker.
 const END_MARGIN: f32 = 1e-4;
 
-/// Per object, its face hierarchy once it has moved (`None` inside: too large).
+/// Objects with more triangles get no exact area-light test (their moves mark the points an
+/// area light may light differently stale): each point tests every solid of the object
+/// its pyramid to the light meets.
+pub const MAX_EXACT_AREA_TRIANGLES: usize = 4096;
+
+/// What a move's exact tests need of one object, made at its first move.
+pub struct Exact {
+    /// Its face hierarchy (point lights).
+    pub bvh: FaceBvh,
+    /// Its triangles grouped by convex closed solid, when every triangle is in one (area
+    /// lights), each with whether its winding normal points out of the solid; `None`
+    /// otherwise.
+    pub solids: Option<Vec<Vec<(u32, bool)>>>,
+}
+
+/// Per object, what its exact tests need once it has moved (`None` inside: too large); per
+/// light, its polygon if it is an area light.
 pub struct MoveShadows {
-    bvhs: Vec<Option<Option<FaceBvh>>>,
+    exact: Vec<Option<Option<Exact>>>,
+    areas: Vec<Option<LightPlane>>,
+}
+
+/// `mesh`'s triangles grouped by convex closed solid (the discontinuity mesh's
+/// [`crate::dmesh::solid::Solids`]), each with whether its winding normal points out of the
+/// solid, if every triangle is in one.
+pub fn convex_solids(mesh: &edgepoint_scene::Mesh) -> Option<Vec<Vec<(u32, bool)>>> {
+    let g = Geometry::from_objects(&[(mesh.positions.iter().map(|p| p.as_dvec3()).collect(), mesh.triangles.clone())]);
+    let mut by: std::collections::BTreeMap<u32, Vec<(u32, bool)>> = std::collections::BTreeMap::new();
+    for t in 0..mesh.triangles.len() as u32 {
+        by.entry(g.solids.convex_component(t)?).or_default().push((t, g.solids.outward[t as usize]));
+    }
+    Some(by.into_values().collect())
 }
 
 impl MoveShadows {
-    pub fn new(objects: usize) -> Self {
-        MoveShadows { bvhs: (0..objects).map(|_| None).collect() }
+    pub fn new(scene: &Scene) -> Self {
+        let areas = scene.lights.iter().map(|l| match l {
+            Light::Area { vertices, .. } => LightPlane::new(vertices),
+            _ => None,
+        });
+        MoveShadows { exact: (0..scene.objects.len()).map(|_| None).collect(), areas: areas.collect() }
     }
 
-    /// Builds `object`'s hierarchy if it has none yet (at most once per object).
+    /// Per light (the scene's order), its polygon if it is an area light.
+    pub fn areas(&self) -> &[Option<LightPlane>] {
+        &self.areas
+    }
+
+    /// Builds what `object`'s exact tests need if not yet done (at most once per object).
     pub fn prepare(&mut self, scene: &Scene, object: u32) {
-        let slot = &mut self.bvhs[object as usize];
+        let slot = &mut self.exact[object as usize];
         if slot.is_none() {
             let mesh = &scene.objects[object as usize].mesh;
-            *slot = Some((mesh.triangles.len() <= MAX_EXACT_TRIANGLES).then(|| FaceBvh::build(mesh, &NoProgress)));
+            let n = mesh.triangles.len();
+            *slot = Some((n <= MAX_EXACT_TRIANGLES).then(|| Exact { bvh: FaceBvh::build(mesh, &NoProgress), solids: if n <= MAX_EXACT_AREA_TRIANGLES { convex_solids(mesh) } else { None } }));
         }
     }
 
-    /// `object`'s hierarchy, if [`Self::prepare`]d and not too large.
-    pub fn get(&self, object: u32) -> Option<&FaceBvh> {
-        self.bvhs.get(object as usize).and_then(|b| b.as_ref()).and_then(|b| b.as_ref())
+    /// What `object`'s exact tests need, if [`Self::prepare`]d and not too large.
+    pub fn get(&self, object: u32) -> Option<&Exact> {
+        self.exact.get(object as usize).and_then(|b| b.as_ref()).and_then(|b| b.as_ref())
     }
 }
 
@@ -67,33 +120,120 @@ pub fn segment_hits_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool 
     ray_triangle(a, b - a, v0, v1, v2).is_some_and(|t| t > END_MARGIN && t < 1.0 - END_MARGIN)
 }
 
-/// The change a move of one object from one place to another made to a point's shadows: the
-/// object's hierarchy (`None`: no exact test) and the inverses of its transforms before and
-/// after.
+/// How much of an area light an object hides from a point, by itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Hidden {
+    Nothing,
+    Part,
+    All,
+}
+
+/// An object made of convex closed solids, placed: per solid its world box and its
+/// triangles, each with its outward normal.
+pub type PlacedSolids = Vec<((DVec3, DVec3), Vec<([DVec3; 3], DVec3)>)>;
+
+/// `solids` (triangles of `mesh`, [`convex_solids`]) placed by `t` (a rigid move or any
+/// affine map that keeps the solids' orientation).
+pub fn place_solids(mesh: &edgepoint_scene::Mesh, solids: &[Vec<(u32, bool)>], t: &Affine3A) -> PlacedSolids {
+    solids
+        .iter()
+        .map(|ts| {
+            let tris: Vec<([DVec3; 3], DVec3)> = ts
+                .iter()
+                .map(|(f, out)| {
+                    let [a, b, c] = mesh.triangle(*f as usize).map(|v| t.transform_point3(v).as_dvec3());
+                    let n = (b - a).cross(c - a);
+                    ([a, b, c], if *out { n } else { -n })
+                })
+                .collect();
+            let b = tris.iter().flat_map(|t| t.0).fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+            (b, tris)
+        })
+        .collect()
+}
+
+/// The whole of `light` as seen from `p`, before any blocker: the light wholly in front of
+/// `p`'s plane parallel to it, so that nothing the shading's tangent plane keeps is left
+/// out. `None` when `p` is behind the light.
+pub fn whole_light(light: &LightPlane, p: Vec3) -> Option<Visible<'_>> {
+    Visible::new(light, p, (-light.n).as_vec3())
+}
+
+/// How much of the light of `vis` ([`whole_light`] at the point) the placed `solids` hide by
+/// themselves: less each solid's shadow whose box the pyramid from the point to the light
+/// does not pass over ([`Visible::solid_shadow`], exactly the union of its triangles'
+/// shadows; of its triangles turned toward the point only, when the point is outside the
+/// solid's box, since every line from the point that meets the solid enters it through one
+/// of those, between the point and the light).
+pub fn hidden_by(solids: &PlacedSolids, mut vis: Visible) -> Hidden {
+    let mut hid = false;
+    let p = vis.pyramid().0;
+    for (b, tris) in solids {
+        if vis.passes_over_box(*b) {
+            continue;
+        }
+        // (Inside the solid's box the point may be inside the solid, which every triangle
+        // then turns away from: all are taken.)
+        let inside = p.cmpge(b.0).all() && p.cmple(b.1).all();
+        if let Some(s) = vis.solid_shadow(tris.iter().filter(|(t, n)| inside || n.dot(p - t[0]) > 0.0).map(|(t, _)| *t)) {
+            hid |= vis.subtract(&s);
+        }
+        if vis.is_empty() {
+            return Hidden::All;
+        }
+    }
+    if hid {
+        Hidden::Part
+    } else {
+        Hidden::Nothing
+    }
+}
+
+/// The change a move of one object from one place to another made to a point's shadows:
+/// the object's exact tests (`None`: none), the inverses of its transforms before and
+/// after, its solids placed before and after (area lights), and per light its polygon if it
+/// is an area light.
 pub struct MoveQuery<'a> {
     pub bvh: Option<&'a FaceBvh>,
     pub before: Affine3A,
     pub after: Affine3A,
+    pub solids: Option<(Arc<PlacedSolids>, Arc<PlacedSolids>)>,
     pub lights: &'a [LightBound],
+    pub areas: &'a [Option<LightPlane>],
 }
 
 impl<'a> MoveQuery<'a> {
-    /// The query for a move from `from` to `to`.
-    pub fn new(bvh: Option<&'a FaceBvh>, from: &Affine3A, to: &Affine3A, lights: &'a [LightBound]) -> Self {
-        MoveQuery { bvh, before: from.inverse(), after: to.inverse(), lights }
+    /// The query for a move of the object with mesh `mesh` from `from` to `to`; `areas` per
+    /// light its polygon if it is an area light (none: area lights get no exact answer).
+    pub fn new(exact: Option<&'a Exact>, mesh: &edgepoint_scene::Mesh, from: &Affine3A, to: &Affine3A, lights: &'a [LightBound], areas: &'a [Option<LightPlane>]) -> Self {
+        let solids = exact.and_then(|e| e.solids.as_ref()).map(|s| (Arc::new(place_solids(mesh, s, from)), Arc::new(place_solids(mesh, s, to))));
+        MoveQuery::placed(exact, from, to, solids, lights, areas)
+    }
+
+    /// [`Self::new`] with the object's solids placed before and after already (`None`: no
+    /// exact area-light answer), as the session keeps them between moves.
+    pub fn placed(exact: Option<&'a Exact>, from: &Affine3A, to: &Affine3A, solids: Option<(Arc<PlacedSolids>, Arc<PlacedSolids>)>, lights: &'a [LightBound], areas: &'a [Option<LightPlane>]) -> Self {
+        MoveQuery { bvh: exact.map(|e| &e.bvh), before: from.inverse(), after: to.inverse(), solids, lights, areas }
     }
 }
 
 impl ShadowQuery for MoveQuery<'_> {
     fn change(&self, p: Vec3, light: usize) -> ShadowChange {
         let l = self.lights[light];
-        match self.bvh {
-            Some(bvh) if l.radius == 0.0 => {
-                if segment_blocked(bvh, &self.before, p, l.center) != segment_blocked(bvh, &self.after, p, l.center) {
-                    ShadowChange::Changed
-                } else {
-                    ShadowChange::Unchanged
+        let changed = |c: bool| if c { ShadowChange::Changed } else { ShadowChange::Unchanged };
+        if let (Some(bvh), 0.0) = (self.bvh, l.radius) {
+            return changed(segment_blocked(bvh, &self.before, p, l.center) != segment_blocked(bvh, &self.after, p, l.center));
+        }
+        match (&self.solids, self.areas.get(light).and_then(|a| a.as_ref())) {
+            (Some((from, to)), Some(area)) => {
+                // Behind the light: it lights the point in neither place.
+                let Some(vis) = whole_light(area, p) else { return ShadowChange::Unchanged };
+                let before = hidden_by(from, vis.clone());
+                // Hiding part of the light in one place, the shading changed whatever the other.
+                if before == Hidden::Part {
+                    return ShadowChange::Changed;
                 }
+                changed(hidden_by(to, vis) != before)
             }
             _ => ShadowChange::Unknown,
         }
@@ -103,6 +243,7 @@ impl ShadowQuery for MoveQuery<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use edgepoint_scene::geometry::transformed_box;
     use crate::rng::mix64;
 
     /// A uniform number in [0, 1) from a seed.
@@ -114,10 +255,10 @@ mod tests {
     fn the_hierarchy_test_equals_every_triangle_tested() {
         let scene = edgepoint_scene::builtin::load("cornell-point").unwrap();
         let id = scene.object_id("tallbox").unwrap();
-        let mut ms = MoveShadows::new(scene.objects.len());
+        let mut ms = MoveShadows::new(&scene);
         assert!(ms.get(id).is_none(), "built at the first move only");
         ms.prepare(&scene, id);
-        let bvh = ms.get(id).expect("a box is small");
+        let bvh = &ms.get(id).expect("a box is small").bvh;
         let mesh = &scene.objects[id as usize].mesh;
         let (lo, hi) = mesh.bounds;
         let size = hi - lo;
@@ -159,17 +300,65 @@ mod tests {
         // light's foot, so x in [-1, 1] before and [0, 2] after (along z in [-1, 1]).
         let v = [Vec3::new(-0.5, 1.0, -0.5), Vec3::new(0.5, 1.0, -0.5), Vec3::new(0.5, 1.0, 0.5), Vec3::new(-0.5, 1.0, 0.5)];
         let mesh = edgepoint_scene::Mesh::from_triangles(v.to_vec(), vec![[0, 1, 2], [0, 2, 3]], &NoProgress);
-        let bvh = FaceBvh::build(&mesh, &NoProgress);
+        let exact = Exact { bvh: FaceBvh::build(&mesh, &NoProgress), solids: None };
         let lights = [LightBound { center: Vec3::new(0.0, 2.0, 0.0), radius: 0.0 }, LightBound { center: Vec3::new(0.0, 2.0, 0.0), radius: 0.1 }];
         let (from, to) = (Affine3A::IDENTITY, Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)));
-        let q = MoveQuery::new(Some(&bvh), &from, &to, &lights);
+        let q = MoveQuery::new(Some(&exact), &mesh, &from, &to, &lights, &[]);
         for k in 0..=60 {
             let x = -1.5 + k as f32 * 0.0625 + 0.01;
             let want = if (x > -1.0 && x < 0.0) || (x > 1.0 && x < 2.0) { ShadowChange::Changed } else { ShadowChange::Unchanged };
             assert_eq!(q.change(Vec3::new(x, 0.0, 0.3), 0), want, "x = {x}");
             assert_eq!(q.change(Vec3::new(x, 0.0, 0.3), 1), ShadowChange::Unknown, "an area light");
         }
-        let none = MoveQuery::new(None, &from, &to, &lights);
+        let none = MoveQuery::new(None, &mesh, &from, &to, &lights, &[]);
         assert_eq!(none.change(Vec3::new(-0.5, 0.0, 0.0), 0), ShadowChange::Unknown, "no hierarchy");
+    }
+
+    /// [`hidden_by`] against the light seen from the point occluded by every triangle of the
+    /// object (no solids): `cornell`'s tall box (one solid, standing on the floor) and
+    /// `rooms`' `chair4a` (six boxes, the back welded to the seat along an edge) placed at
+    /// random (turned about Y, slid up to a third of the room or 1.5 m), random points
+    /// around and under them from the floor up to their tops, each scene's lights.
+    #[test]
+    fn hidden_by_equals_every_triangle_occluding_the_light() {
+        for (name, object, slide) in [("cornell", "tallbox", None), ("rooms", "chair4a", Some(1.5f32))] {
+            let scene = edgepoint_scene::builtin::load(name).unwrap();
+            let id = scene.object_id(object).unwrap() as usize;
+            let mesh = &scene.objects[id].mesh;
+            let solids = convex_solids(mesh).expect("made of convex solids");
+            let ms = MoveShadows::new(&scene);
+            let planes: Vec<&LightPlane> = ms.areas().iter().flatten().collect();
+            let (lo, hi) = scene.bounds();
+            let size = hi - lo;
+            let base = scene.objects[id].transform;
+            let mut counts = [0usize; 3];
+            for k in 0..3000u64 {
+                let r = |j: u64| uniform(k * 16 + j);
+                let shift = slide.map_or(size / 3.0, Vec3::splat);
+                let t = Affine3A::from_translation(Vec3::new(r(0) - 0.5, 0.0, r(1) - 0.5) * shift) * base * Affine3A::from_rotation_y(r(2) * 6.0);
+                let (blo, bhi) = transformed_box(&t, mesh.bounds);
+                let c = (blo + bhi) * 0.5;
+                let p = Vec3::new(c.x + (r(3) - 0.5) * 3.0 * (bhi.x - blo.x), lo.y + r(4) * (bhi.y - lo.y), c.z + (r(5) - 0.5) * 3.0 * (bhi.z - blo.z));
+                let plane = planes[(r(6) * planes.len() as f32) as usize % planes.len()];
+                let got = whole_light(plane, p).map_or(Hidden::Nothing, |v| hidden_by(&place_solids(mesh, &solids, &t), v));
+                let want = Visible::new(plane, p, (-plane.n).as_vec3()).map_or(Hidden::Nothing, |mut v| {
+                    let mut hid = false;
+                    for f in 0..mesh.triangles.len() {
+                        hid |= v.occlude(mesh.triangle(f).map(|x| t.transform_point3(x).as_dvec3()));
+                    }
+                    if v.is_empty() {
+                        Hidden::All
+                    } else if hid {
+                        Hidden::Part
+                    } else {
+                        Hidden::Nothing
+                    }
+                });
+                assert_eq!(got, want, "{name}: point {p}, move {k}");
+                counts[want as usize] += 1;
+            }
+            eprintln!("{name}: nothing / part / all: {counts:?}");
+            assert!(counts.iter().all(|c| *c > 50), "{name}: nothing / part / all: {counts:?}");
+        }
     }
 }
