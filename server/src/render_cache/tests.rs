@@ -1024,6 +1024,21 @@ fn ages_equal_the_wide_conversion() {
     }
 }
 
+/// A cache with one point per pixel of `cam` (at a random place in the pixel, `seed`) on the
+/// floor y = 0, shaded `shade`.
+fn floor_points(cam: &CameraFrame, seed: u64, shade: impl Fn(Vec3) -> Vec3) -> RenderCache {
+    let mut c = cache(cam.width, cam.height, 2.0);
+    let mut rng = Rng(seed);
+    for y in 0..cam.height {
+        for x in 0..cam.width {
+            let (o, d) = cam.ray(x as f32 + rng.unit(), y as f32 + rng.unit());
+            let p = o + d * (-o.y / d.y);
+            assert!(c.insert(&at(hit(p, shade(p), 7), x, y)));
+        }
+    }
+    c
+}
+
 /// The exact shading of a floor point under a point light with a square blocker placed by
 /// `t`: lit 1, in its shadow 0.1 (the workers' `direct` shader, reduced to its shadow test).
 fn floor_shade(bvh: &crate::edges::face_bvh::FaceBvh, t: &glam::Affine3A, light: Vec3, p: Vec3) -> Vec3 {
@@ -1050,18 +1065,7 @@ fn a_move_drops_the_points_whose_point_light_shadow_it_changed_and_keeps_the_oth
     let light = Vec3::new(0.0, 2.0, 0.0);
     let (from, to) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.4, 0.0, 0.0)));
     // One point per pixel, shaded exactly with the blocker in its old place.
-    let filled = || {
-        let mut c = cache(w, h, 2.0);
-        let mut rng = Rng(11);
-        for y in 0..h {
-            for x in 0..w {
-                let (o, d) = cam.ray(x as f32 + rng.unit(), y as f32 + rng.unit());
-                let p = o + d * (-o.y / d.y);
-                assert!(c.insert(&at(hit(p, floor_shade(&bvh, &from, light, p), 7), x, y)));
-            }
-        }
-        c
-    };
+    let filled = || floor_points(&cam, 11, |p| floor_shade(&bvh, &from, light, p));
     let lights = [LightBound { center: light, radius: 0.0 }];
     let region = (Vec3::new(-0.5, 1.0, -0.5), Vec3::new(0.9, 1.0, 0.5));
     // Pixels whose shown point has the wrong shading for the new place, and stale ones.
@@ -1149,15 +1153,7 @@ fn a_move_drops_the_points_whose_area_light_shading_it_changed_and_keeps_the_oth
     let plane = LightPlane::new(&corners).unwrap();
     assert!(plane.n.y < 0.0, "the light faces down");
     let (from, to) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.4, 0.0, 0.0)));
-    let mut c = cache(w, h, 2.0);
-    let mut rng = Rng(13);
-    for y in 0..h {
-        for x in 0..w {
-            let (o, d) = cam.ray(x as f32 + rng.unit(), y as f32 + rng.unit());
-            let p = o + d * (-o.y / d.y);
-            assert!(c.insert(&at(hit(p, floor_shade_area(&slab, &from, &plane, p), 7), x, y)));
-        }
-    }
+    let mut c = floor_points(&cam, 13, |p| floor_shade_area(&slab, &from, &plane, p));
     let lights = [LightBound { center: Vec3::new(0.0, 2.0, 0.0), radius: a * std::f32::consts::SQRT_2 }];
     let areas = [Some(plane.clone())];
     let region = (Vec3::new(-0.5, 0.99, -0.5), Vec3::new(0.9, 1.01, 0.5));
