@@ -199,9 +199,7 @@ impl<'a> Visible<'a> {
             }
             q.push(light.local(p + (x - p) / s));
         }
-        let mut q = convex_hull(q);
-        drop_repeated(&mut q, self.min_length);
-        Ok((q.len() >= 3 && signed_area2(&q) > self.min_area2).then_some(q))
+        Ok(self.hull_shadow(q))
     }
 
     /// The shadow on the light's plane of a convex closed solid with triangles `tris` that
@@ -219,6 +217,12 @@ impl<'a> Visible<'a> {
                 q.extend(s);
             }
         }
+        self.hull_shadow(q)
+    }
+
+    /// The convex hull of shadow points `q` as a shadow polygon (corners closer than the
+    /// shortest edge dropped), `None` when it has no area.
+    fn hull_shadow(&self, q: Vec<DVec2>) -> Option<Vec<DVec2>> {
         let mut q = convex_hull(q);
         drop_repeated(&mut q, self.min_length);
         (q.len() >= 3 && signed_area2(&q) > self.min_area2).then_some(q)

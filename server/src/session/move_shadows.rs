@@ -93,7 +93,9 @@ impl MoveShadows {
         if slot.is_none() {
             let mesh = &scene.objects[object as usize].mesh;
             let n = mesh.triangles.len();
-            *slot = Some((n <= MAX_EXACT_TRIANGLES).then(|| Exact { bvh: FaceBvh::build(mesh, &NoProgress), solids: if n <= MAX_EXACT_AREA_TRIANGLES { convex_solids(mesh) } else { None } }));
+            // The solids only serve area lights: a scene without any places none on its moves.
+            let area_test = n <= MAX_EXACT_AREA_TRIANGLES && self.areas.iter().any(|a| a.is_some());
+            *slot = Some((n <= MAX_EXACT_TRIANGLES).then(|| Exact { bvh: FaceBvh::build(mesh, &NoProgress), solids: if area_test { convex_solids(mesh) } else { None } }));
         }
     }
 
@@ -203,8 +205,11 @@ pub struct MoveQuery<'a> {
 }
 
 impl<'a> MoveQuery<'a> {
-    /// The query for a move of the object with mesh `mesh` from `from` to `to`; `areas` per
-    /// light its polygon if it is an area light (none: area lights get no exact answer).
+    /// The query for a move of the object with mesh `mesh` from `from` to `to`, its solids
+    /// placed here; `areas` per light its polygon if it is an area light (none: area lights
+    /// get no exact answer). (The session keeps the placed solids between moves:
+    /// [`Self::placed`].)
+    #[cfg(test)]
     pub fn new(exact: Option<&'a Exact>, mesh: &edgepoint_scene::Mesh, from: &Affine3A, to: &Affine3A, lights: &'a [LightBound], areas: &'a [Option<LightPlane>]) -> Self {
         let solids = exact.and_then(|e| e.solids.as_ref()).map(|s| (Arc::new(place_solids(mesh, s, from)), Arc::new(place_solids(mesh, s, to))));
         MoveQuery::placed(exact, from, to, solids, lights, areas)
@@ -341,7 +346,7 @@ mod tests {
                 let p = Vec3::new(c.x + (r(3) - 0.5) * 3.0 * (bhi.x - blo.x), lo.y + r(4) * (bhi.y - lo.y), c.z + (r(5) - 0.5) * 3.0 * (bhi.z - blo.z));
                 let plane = planes[(r(6) * planes.len() as f32) as usize % planes.len()];
                 let got = whole_light(plane, p).map_or(Hidden::Nothing, |v| hidden_by(&place_solids(mesh, &solids, &t), v));
-                let want = Visible::new(plane, p, (-plane.n).as_vec3()).map_or(Hidden::Nothing, |mut v| {
+                let want = whole_light(plane, p).map_or(Hidden::Nothing, |mut v| {
                     let mut hid = false;
                     for f in 0..mesh.triangles.len() {
                         hid |= v.occlude(mesh.triangle(f).map(|x| t.transform_point3(x).as_dvec3()));
