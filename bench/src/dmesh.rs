@@ -73,6 +73,38 @@ pub fn object_to_move(scene: &edgepoint_scene::Scene, name: Option<&str>) -> Res
     }
 }
 
+/// Receivers listed per move: the slowest ones, and the objects whose receivers took most.
+const WHERE_LISTED: usize = 8;
+
+/// Where a move's update went, from its receivers' costs: the [`WHERE_LISTED`] slowest
+/// receivers (light, triangle, the triangle's object, CPU time, faces redone, traces and
+/// EEE surfaces made anew), the objects whose receivers took most (receivers, CPU time,
+/// faces redone), and the receivers' CPU time in all.
+fn where_it_went(scene: &edgepoint_scene::Scene, g: &Geometry, costs: &mut [edgepoint_server::dmesh::update::ReceiverCost]) -> (serde_json::Value, serde_json::Value, f64) {
+    let name = |t: u32| scene.objects[g.object[t as usize] as usize].name.clone();
+    costs.sort_by(|a, b| b.cpu_ns.cmp(&a.cpu_ns));
+    let slowest: Vec<serde_json::Value> = costs
+        .iter()
+        .take(WHERE_LISTED)
+        .map(|c| {
+            json!({
+                "light": c.light, "triangle": c.tri, "object": name(c.tri), "cpu_ms": c.cpu_ns as f64 / 1e6,
+                "faces_recomputed": c.stats.faces_recomputed, "faces_kept": c.stats.faces_kept, "traces_recast": c.stats.traces_recast, "eee_recast": c.stats.eee_recast,
+            })
+        })
+        .collect();
+    let mut by: std::collections::BTreeMap<String, (usize, u64, usize)> = std::collections::BTreeMap::new();
+    for c in costs.iter() {
+        let e = by.entry(name(c.tri)).or_default();
+        *e = (e.0 + 1, e.1 + c.cpu_ns, e.2 + c.stats.faces_recomputed);
+    }
+    let mut by: Vec<(String, (usize, u64, usize))> = by.into_iter().collect();
+    by.sort_by(|a, b| b.1 .1.cmp(&a.1 .1));
+    let by_object: Vec<serde_json::Value> = by.iter().take(WHERE_LISTED).map(|(n, (r, t, f))| json!({"object": n, "receivers": r, "cpu_ms": *t as f64 / 1e6, "faces_recomputed": f})).collect();
+    let total = costs.iter().map(|c| c.cpu_ns).sum::<u64>() as f64 / 1e6;
+    (json!(slowest), json!(by_object), total)
+}
+
 pub fn run(a: DmeshArgs) -> Result<()> {
     let progress = LogProgress::new("dmesh");
     let p = std::path::Path::new(&a.scene);
@@ -122,6 +154,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let mut rng = Rng::new(a.seed);
     let mut g = g;
     let (mut incr_ms, mut full_after_ms, mut bad, mut moves) = (Vec::new(), Vec::new(), 0usize, Vec::new());
+    let mut where_lines = Vec::new();
     for _ in 0..a.moves {
         let (olo, ohi) = g.object_bounds(object);
         let step = a.step * (ohi - olo).length();
@@ -130,7 +163,8 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         let d = glam::DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 2.0 * step;
         let new = g.moved_rigidly(object, rot, d);
         let t = Instant::now();
-        let stats = mesh.move_object(&g, &new, &mut grid, object);
+        let mut costs = Vec::new();
+        let stats = mesh.move_object_profiled(&g, &new, &mut grid, object, &mut costs);
         let ti = t.elapsed().as_secs_f64() * 1e3;
         g = new;
         let t = Instant::now();
@@ -141,7 +175,11 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         bad += m;
         incr_ms.push(ti);
         full_after_ms.push(tf);
+        let (slowest, by_object, receivers_cpu_ms) = where_it_went(&scene, &g, &mut costs);
+        let objects: Vec<String> = by_object.as_array().into_iter().flatten().take(3).map(|o| format!("{} {:.1} ms ({} receivers)", o["object"].as_str().unwrap_or("?"), o["cpu_ms"].as_f64().unwrap_or(0.0), o["receivers"])).collect();
+        where_lines.push(format!("  move {}: receivers' CPU {receivers_cpu_ms:.1} ms, most on {}\n", moves.len() + 1, objects.join(", ")));
         moves.push(json!({
+            "receivers_cpu_ms": receivers_cpu_ms, "slowest_receivers": slowest, "by_receiver_object": by_object,
             "incremental_ms": ti, "full_ms": tf, "speedup": tf / ti, "mismatches": m,
             "receivers_in_motion_volume": stats.receivers_in_motion_volume, "receivers_updated": stats.receivers_updated,
             "receivers_recomputed": stats.receivers_recomputed, "receivers_rebuilt": stats.receivers_rebuilt, "receivers_kept_in_umbra": stats.receivers_kept_in_umbra, "arrangements_kept": stats.arrangements_kept, "traces_reintersected": stats.traces_reintersected,
@@ -171,7 +209,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         si / a.moves.max(1) as f64,
         sf / a.moves.max(1) as f64,
         speedup.unwrap_or(f64::NAN)
-    );
+    ) + &where_lines.concat();
     let mut out = json!({
         "scene": a.scene,
         "triangles": g.tris.len(),

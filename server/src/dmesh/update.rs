@@ -102,6 +102,17 @@ impl std::ops::Add for UpdateStats {
     }
 }
 
+/// What one receiver's update took ([`DiscontinuityMesh::move_object_profiled`]): the
+/// light and triangle, the CPU time of the whole of it (its scan included), and its part
+/// of the move's counts and times.
+#[derive(Debug, Clone, Copy)]
+pub struct ReceiverCost {
+    pub light: u32,
+    pub tri: u32,
+    pub cpu_ns: u64,
+    pub stats: UpdateStats,
+}
+
 /// Nanoseconds since `t`.
 fn ns(t: Instant) -> u64 {
     t.elapsed().as_nanos() as u64
@@ -121,6 +132,18 @@ impl DiscontinuityMesh {
     /// [`Self::move_object`], appending to `changed` every receiver whose mesh it replaced
     /// (light, triangle), in no particular order: the others are as they were.
     pub fn move_object_listing(&mut self, old: &Geometry, new: &Geometry, grid: &mut Grid, o: u32, changed: &mut Vec<(u32, u32)>) -> UpdateStats {
+        self.move_object_costed(old, new, grid, o, changed, None)
+    }
+
+    /// [`Self::move_object`], appending to `costs` what each receiver it updated or
+    /// recomputed took (for the benchmark's account of where an update goes), in no
+    /// particular order.
+    pub fn move_object_profiled(&mut self, old: &Geometry, new: &Geometry, grid: &mut Grid, o: u32, costs: &mut Vec<ReceiverCost>) -> UpdateStats {
+        self.move_object_costed(old, new, grid, o, &mut Vec::new(), Some(costs))
+    }
+
+    fn move_object_costed(&mut self, old: &Geometry, new: &Geometry, grid: &mut Grid, o: u32, changed: &mut Vec<(u32, u32)>, costs: Option<&mut Vec<ReceiverCost>>) -> UpdateStats {
+        let profile = costs.is_some();
         let moved = new.object_tris(o);
         grid.remove(old, moved.clone());
         grid.insert(new, moved.clone());
@@ -137,7 +160,7 @@ impl DiscontinuityMesh {
         let (lights, silhouettes) = (&self.lights, &silhouettes);
         // Every light's receivers in one parallel pass: a small object's work is a few
         // hundred receivers a light, too little to keep two threads busy light by light.
-        let (stats, list) = self
+        let stats = self
             .meshes
             .par_iter_mut()
             .enumerate()
@@ -145,8 +168,9 @@ impl DiscontinuityMesh {
             .map_init(Scratch::default, |scratch, (l, t, slot)| {
                 let mut s = UpdateStats::default();
                 if only.is_some_and(|o| !o[t as usize]) {
-                    return (s, None);
+                    return (s, None, None);
                 }
+                let started = profile.then(Instant::now);
                 let light = &lights[l];
                 let mut replaced = false;
                 if moved.contains(&t) {
@@ -163,23 +187,30 @@ impl DiscontinuityMesh {
                         replaced = true;
                     }
                 }
-                (s, replaced.then_some((l as u32, t)))
+                let cost = started.filter(|_| replaced).map(|t0| ReceiverCost { light: l as u32, tri: t, cpu_ns: ns(t0), stats: s });
+                (s, replaced.then_some((l as u32, t)), cost)
             })
             .fold(
-                || (UpdateStats::default(), Vec::new()),
-                |(a, mut v), (s, c)| {
-                    v.extend(c);
-                    (a + s, v)
+                || (UpdateStats::default(), Vec::new(), Vec::new()),
+                |(a, mut v, mut c), (s, r, k)| {
+                    v.extend(r);
+                    c.extend(k);
+                    (a + s, v, c)
                 },
             )
             .reduce(
-                || (UpdateStats::default(), Vec::new()),
-                |(a, mut v), (b, w)| {
+                || (UpdateStats::default(), Vec::new(), Vec::new()),
+                |(a, mut v, mut c), (b, w, k)| {
                     v.extend(w);
-                    (a + b, v)
+                    c.extend(k);
+                    (a + b, v, c)
                 },
             );
+        let (stats, list, receiver_costs) = (stats.0, stats.1, stats.2);
         changed.extend(list);
+        if let Some(costs) = costs {
+            costs.extend(receiver_costs);
+        }
         total + stats
     }
 }
