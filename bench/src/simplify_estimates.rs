@@ -151,10 +151,10 @@ fn run_moves(scene: &Scene, triples: &[TripleKey], moves: &Moves) -> Result<(Val
     let (all, _) = finder.errors(&mut kept);
     let finder_all_ms = w.elapsed().as_secs_f64() * 1e3;
     let w = Instant::now();
-    let mut mesh = MeshShadows::build(scene, &t);
+    let mut mesh = MeshShadows::build(scene, &t, &edgepoint_scene::NoProgress);
     let mesh_build_ms = w.elapsed().as_secs_f64() * 1e3;
     let w = Instant::now();
-    let mesh_edges = mesh.as_mut().map_or(0, |m| m.estimate(&finder.scene_lights().0, 4096, || false));
+    let mesh_edges = mesh.as_mut().map_or(0, |m| m.estimate(&finder.scene_lights().0, 4096, || false, &edgepoint_scene::NoProgress));
     let mesh_all_ms = w.elapsed().as_secs_f64() * 1e3;
     let bits = |v: &[(EdgeSegment, f64)]| v.iter().map(|(e, x)| (e.a.to_array().map(f32::to_bits), e.b.to_array().map(f32::to_bits), x.to_bits())).collect::<Vec<_>>();
     let mut per_move = Vec::new();
@@ -185,12 +185,12 @@ fn run_moves(scene: &Scene, triples: &[TripleKey], moves: &Moves) -> Result<(Val
             let dropped = mesh.check_estimates(&lights);
             let check_ms = w.elapsed().as_secs_f64() * 1e3;
             let w = Instant::now();
-            let again = mesh.estimate(&lights, 4096, || false);
+            let again = mesh.estimate(&lights, 4096, || false, &edgepoint_scene::NoProgress);
             let est_ms = w.elapsed().as_secs_f64() * 1e3;
             let with_kept = mesh.keyed_estimates();
             mesh.forget_estimates();
             let w = Instant::now();
-            let all = mesh.estimate(&lights, 4096, || false);
+            let all = mesh.estimate(&lights, 4096, || false, &edgepoint_scene::NoProgress);
             let fresh_ms = w.elapsed().as_secs_f64() * 1e3;
             let differ = with_kept.iter().zip(mesh.keyed_estimates()).filter(|(a, b)| **a != *b).count();
             m["mesh"] = json!({"edges": all, "dropped": dropped, "estimated": again, "kept": all - again, "update_ms": sync_ms, "check_ms": check_ms, "estimate_ms": est_ms, "afresh_ms": fresh_ms, "differ": differ});

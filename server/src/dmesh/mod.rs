@@ -12,8 +12,10 @@
 //!
 //! An algorithm module: plain geometry, no session, no network.
 use edgepoint_scene::backprojection::LightPlane;
+use edgepoint_scene::{NoProgress, Progress};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 pub mod arrangement;
 pub mod eee;
@@ -199,6 +201,30 @@ pub fn frame(g: &Geometry, light: &LightPlane, tri: u32, tol: f64) -> Option<(Re
     Some((receiver, above, shaft))
 }
 
+/// Units of work counted before each report to a [`Progress`] from parallel loops (a
+/// report takes a lock; a receiver can take a microsecond).
+pub const PROGRESS_STEP: u64 = 1024;
+
+/// Counts units of work done on any thread and reports them to a [`Progress`] every
+/// [`PROGRESS_STEP`] (what is left under a step is reported by the stage's end).
+pub struct ProgressSteps<'a> {
+    progress: &'a dyn Progress,
+    done: AtomicU64,
+}
+
+impl<'a> ProgressSteps<'a> {
+    pub fn new(progress: &'a dyn Progress) -> Self {
+        ProgressSteps { progress, done: AtomicU64::new(0) }
+    }
+
+    /// One unit done.
+    pub fn one(&self) {
+        if (self.done.fetch_add(1, Ordering::Relaxed) + 1).is_multiple_of(PROGRESS_STEP) {
+            self.progress.advance(PROGRESS_STEP);
+        }
+    }
+}
+
 /// Per-thread scratch of the grid queries.
 #[derive(Debug, Default)]
 pub struct Scratch {
@@ -286,12 +312,21 @@ impl DiscontinuityMesh {
     /// still blocks): for scenes too large to mesh whole in a test or a short benchmark run.
     /// Updates keep to the same receivers.
     pub fn compute_for(g: &Geometry, grid: &Grid, lights: &[LightPlane], tol: f64, only: Option<Vec<bool>>) -> DiscontinuityMesh {
+        DiscontinuityMesh::compute_reporting(g, grid, lights, tol, only, &NoProgress)
+    }
+
+    /// [`Self::compute_for`], reporting the (light, triangle) pairs done to `progress` (a
+    /// session's mesh of `rooms` takes seconds), in steps of [`PROGRESS_STEP`].
+    pub fn compute_reporting(g: &Geometry, grid: &Grid, lights: &[LightPlane], tol: f64, only: Option<Vec<bool>>, progress: &dyn Progress) -> DiscontinuityMesh {
+        progress.begin("light-triangle pairs", (lights.len() * g.tris.len()) as u64);
+        let step = ProgressSteps::new(progress);
         let meshes = lights
             .iter()
             .map(|light| {
                 (0..g.tris.len() as u32)
                     .into_par_iter()
                     .map_init(Scratch::default, |s, t| {
+                        step.one();
                         if only.as_ref().is_some_and(|o| !o[t as usize]) {
                             return None;
                         }
@@ -300,6 +335,7 @@ impl DiscontinuityMesh {
                     .collect()
             })
             .collect();
+        progress.end();
         DiscontinuityMesh { lights: lights.to_vec(), meshes, tol, only }
     }
 

@@ -34,7 +34,8 @@ use crate::dmesh::face::{none_can_hide, visible_at, visible_in};
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::segments::{Generator, Runs};
 use std::collections::HashMap;
-use crate::dmesh::{DiscontinuityMesh, ReceiverMesh};
+use crate::dmesh::{DiscontinuityMesh, ProgressSteps, ReceiverMesh};
+use edgepoint_scene::NoProgress;
 use edgepoint_scene::backprojection::{LightPlane, Visible};
 use glam::{DVec2, DVec3, Vec3};
 use rayon::prelude::*;
@@ -146,7 +147,7 @@ fn blocker_segment(g: &Geometry, gen: &Generator, at: (DVec3, DVec3)) -> (DVec3,
 pub fn mesh_shadow_edges(mesh: &DiscontinuityMesh, g: &Geometry, out: &mut Vec<MeshShadowEdge>) -> MeshEdgeCounts {
     let receivers = mesh.receiver_ids();
     let mut counts = MeshEdgeCounts::default();
-    for e in receivers_shadow_edges(mesh, g, &receivers, None) {
+    for e in receivers_shadow_edges(mesh, g, &receivers, None, &ProgressSteps::new(&NoProgress)) {
         counts = counts + e.counts;
         out.extend(e.edges);
     }
@@ -220,11 +221,13 @@ pub struct Moved<'a> {
 /// backprojection passes each of its triangles over there, so the answer is the one without
 /// it, which did not change); `reuse.1` gives a receiver's old decisions (none for the
 /// moved object's own receivers, which moved).
-pub fn receivers_shadow_edges<'d>(mesh: &DiscontinuityMesh, g: &Geometry, receivers: &[(u32, u32)], reuse: Option<(&Moved, &OldDecisions<'d>)>) -> Vec<ReceiverShadowEdges> {
+/// Each receiver done is counted to `steps`.
+pub fn receivers_shadow_edges<'d>(mesh: &DiscontinuityMesh, g: &Geometry, receivers: &[(u32, u32)], reuse: Option<(&Moved, &OldDecisions<'d>)>, steps: &ProgressSteps) -> Vec<ReceiverShadowEdges> {
     let lights: Vec<(f64, DVec3)> = mesh.lights.iter().map(diameter_and_centre).collect();
     receivers
         .par_iter()
         .map(|&(l, t)| {
+            steps.one();
             let mut out = ReceiverShadowEdges::default();
             if let Some(m) = mesh.meshes.get(l as usize).and_then(|ms| ms.get(t as usize)).and_then(|m| m.as_deref()) {
                 let old = reuse.and_then(|(moved, old)| old((l, t)).map(|d| (moved, d)));

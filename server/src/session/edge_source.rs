@@ -46,7 +46,7 @@ use crate::edges::{EdgeKind, EdgeSegment};
 use super::mesh_shadows::MeshShadows;
 use crate::epi::raster::SegmentProjector;
 use crate::epi::soft::append_barriers;
-use edgepoint_scene::{Progress, Scene};
+use edgepoint_scene::{NoProgress, Progress, Scene};
 use glam::{Affine3A, Vec3};
 use std::sync::{Arc, Condvar, Mutex, OnceLock};
 use std::time::Instant;
@@ -78,6 +78,8 @@ pub struct SessionEdges {
     /// Delivers the index once built.
     ready: flume::Receiver<Arc<SceneEdgeIndex>>,
     running: Option<Running>,
+    /// Reports the discontinuity mesh's build, given to the shadow thread when it starts.
+    mesh_progress: Option<Box<dyn Progress + Send>>,
 }
 
 struct Running {
@@ -94,8 +96,9 @@ struct Running {
 
 impl SessionEdges {
     /// Starts building (or waiting for another session's build of) the scene's edge index on
-    /// a helper thread. `progress` reports the build.
-    pub fn new(scene: Arc<Scene>, slot: EdgeIndexSlot, progress: Box<dyn Progress + Send>) -> SessionEdges {
+    /// a helper thread. `progress` reports the build; `mesh_progress` the discontinuity
+    /// mesh's, and its first estimates (paper 003), if the session asks for the mesh.
+    pub fn new(scene: Arc<Scene>, slot: EdgeIndexSlot, progress: Box<dyn Progress + Send>, mesh_progress: Box<dyn Progress + Send>) -> SessionEdges {
         let (tx, rx) = flume::bounded(1);
         let s = scene.clone();
         let spawned = std::thread::Builder::new().name("edge-index".into()).spawn(move || {
@@ -111,7 +114,7 @@ impl SessionEdges {
             // Without the thread the session keeps the brute-force finder: slower, same edges.
             tracing::error!("cannot start the edge-index thread ({e}); edges are found by brute force");
         }
-        SessionEdges { scene, ready: rx, running: None }
+        SessionEdges { scene, ready: rx, running: None, mesh_progress: Some(mesh_progress) }
     }
 
     /// Whether the edge trees are in use.
@@ -140,7 +143,8 @@ impl SessionEdges {
         out.clear();
         if self.running.is_none() {
             if let Ok(index) = self.ready.try_recv() {
-                self.running = Running::start(index, self.scene.clone());
+                let mesh_progress = self.mesh_progress.take().unwrap_or_else(|| Box::new(NoProgress));
+                self.running = Running::start(index, self.scene.clone(), mesh_progress);
             }
         }
         let Some(r) = &mut self.running else {
@@ -188,8 +192,8 @@ impl<V> TripleSet for std::collections::HashMap<TripleKey, V> {
 }
 
 impl Running {
-    fn start(index: Arc<SceneEdgeIndex>, scene: Arc<Scene>) -> Option<Running> {
-        let shadows = ShadowThread::spawn(ShadowFinder::new(index.clone()), scene)?;
+    fn start(index: Arc<SceneEdgeIndex>, scene: Arc<Scene>, mesh_progress: Box<dyn Progress + Send>) -> Option<Running> {
+        let shadows = ShadowThread::spawn(ShadowFinder::new(index.clone()), scene, mesh_progress)?;
         Some(Running {
             geometric: GeometricFinder::new(index),
             shadows,
@@ -263,8 +267,12 @@ struct ShadowThread {
 }
 
 impl ShadowThread {
-    fn spawn(mut finder: ShadowFinder, scene: Arc<Scene>) -> Option<ShadowThread> {
+    fn spawn(mut finder: ShadowFinder, scene: Arc<Scene>, mesh_progress: Box<dyn Progress + Send>) -> Option<ShadowThread> {
         let shared: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
+        // The mesh's first estimates are reported as one stage over however many calls
+        // they take (a newer job pauses them; a minute on `rooms`); those after moves are a
+        // few each, made and paused as the object goes on moving: not reported.
+        let (mut first_estimates, mut first_begun) = (true, false);
         let mut errors = EdgeErrors::new();
         // The mesh, once a job asks for it; `Err(())` once a build found no area light.
         let mut mesh: Option<Result<MeshShadows, ()>> = None;
@@ -364,7 +372,7 @@ impl ShadowThread {
                                 tracing::debug!(dropped, "mesh shadow edge estimates checked after a move");
                             }
                         }
-                        _ => mesh = Some(MeshShadows::build(&scene, &job.transforms).ok_or(())),
+                        _ => mesh = Some(MeshShadows::build(&scene, &job.transforms, &*mesh_progress).ok_or(())),
                     });
                     if let Some(Ok(m)) = &mesh {
                         publish_now(with_mesh(m, finder_tolerance), t.elapsed().as_secs_f64() * 1e3);
@@ -379,7 +387,16 @@ impl ShadowThread {
                     if m.estimates_missing() {
                         let t = Instant::now();
                         let newer = || s.0.lock().unwrap_or_else(|p| p.into_inner()).job.is_some();
-                        let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0, MESH_ESTIMATE_CHUNK, newer));
+                        if first_estimates && !first_begun {
+                            mesh_progress.begin("estimates of the shadow edges (paper 003)", m.estimates_to_make() as u64);
+                            first_begun = true;
+                        }
+                        let progress: &dyn Progress = if first_estimates { &*mesh_progress } else { &NoProgress };
+                        let estimated = crate::background::pool().install(|| m.estimate(&finder.scene_lights().0, MESH_ESTIMATE_CHUNK, newer, progress));
+                        if first_estimates && !m.estimates_missing() {
+                            mesh_progress.end();
+                            first_estimates = false;
+                        }
                         let ms = t.elapsed().as_secs_f64() * 1e3;
                         // Published also when paused: the edges estimated so far are
                         // decided, the others go.
@@ -427,7 +444,6 @@ impl Drop for ShadowThread {
 mod tests {
     use super::*;
     use crate::edges::EdgeKind;
-    use edgepoint_scene::NoProgress;
     use std::collections::HashMap;
     use std::time::Duration;
 
@@ -478,7 +494,7 @@ mod tests {
     fn brute_force_first_then_trees_and_shadows_equal_to_a_direct_finder() {
         let scene = Arc::new(edgepoint_scene::builtin::load("cornell-point").unwrap());
         let slot: EdgeIndexSlot = Arc::default();
-        let mut edges = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        let mut edges = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress), Box::new(NoProgress));
         let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
         let id = |n: &str| scene.object_id(n).unwrap();
         let mut triples: HashMap<TripleKey, ()> = HashMap::new();
@@ -543,11 +559,11 @@ mod tests {
     #[test]
     fn the_mesh_gives_the_area_light_shadow_edges_and_follows_a_move() {
         let scene = Arc::new(edgepoint_scene::builtin::load("cornell").unwrap());
-        let mut edges = SessionEdges::new(scene.clone(), Arc::default(), Box::new(NoProgress));
+        let mut edges = SessionEdges::new(scene.clone(), Arc::default(), Box::new(NoProgress), Box::new(NoProgress));
         let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
         let none: HashMap<TripleKey, ()> = HashMap::new();
         let shadows = |v: &[EdgeSegment]| sorted_keys(&v.iter().copied().filter(|s| !s.kind.is_geometric()).collect::<Vec<_>>());
-        let mut direct = MeshShadows::build(&scene, &t).expect("cornell has an area light");
+        let mut direct = MeshShadows::build(&scene, &t, &NoProgress).expect("cornell has an area light");
         let published = |m: &MeshShadows, tolerance: f64| {
             let mut v = Vec::new();
             let left_out = m.published(tolerance, &mut v);
@@ -576,13 +592,13 @@ mod tests {
         assert_ne!(want_moved, want, "the short box's shadow moved");
         // Only the receivers whose mesh the move replaced made their edges again: the same
         // edges as a mesh built there (also after a second move, of the other box).
-        assert_eq!(published(&MeshShadows::build(&scene, &moved).unwrap(), 0.0).0, want_moved);
+        assert_eq!(published(&MeshShadows::build(&scene, &moved, &NoProgress).unwrap(), 0.0).0, want_moved);
         let mut twice = moved.clone();
         let tall = scene.object_id("tallbox").unwrap() as usize;
         twice[tall] = Affine3A::from_translation(Vec3::new(-0.03, 0.0, 0.05)) * t[tall];
-        let mut other = MeshShadows::build(&scene, &moved).unwrap();
+        let mut other = MeshShadows::build(&scene, &moved, &NoProgress).unwrap();
         assert!(other.sync(&twice));
-        assert_eq!(published(&other, 0.0).0, published(&MeshShadows::build(&scene, &twice).unwrap(), 0.0).0);
+        assert_eq!(published(&other, 0.0).0, published(&MeshShadows::build(&scene, &twice, &NoProgress).unwrap(), 0.0).0);
         until(&mut edges, &moved, 0.0, &want_moved, 0);
 
         // Simplification (paper 003) on the mesh's edges: the session publishes those whose
@@ -598,12 +614,12 @@ mod tests {
         let first = direct.estimate(&finder.scene_lights().0, 16, || {
             asked.set(asked.get() + 1);
             asked.get() > 1
-        });
+        }, &NoProgress);
         assert_eq!(first, 16.min(want_moved.len()));
         assert!(direct.estimates_missing(), "cornell has more than 16 mesh edges");
         let (part, part_left_out) = published(&direct, 10.0);
         assert!(part_left_out <= 16 && part.len() + part_left_out == want_moved.len(), "{part_left_out} left out");
-        assert_eq!(first + direct.estimate(&finder.scene_lights().0, 16, || false), want_moved.len());
+        assert_eq!(first + direct.estimate(&finder.scene_lights().0, 16, || false, &NoProgress), want_moved.len());
         assert!(!direct.estimates_missing());
         let (few, left_out) = published(&direct, 10.0);
         assert_eq!(few.len() + left_out, want_moved.len());
@@ -617,10 +633,10 @@ mod tests {
         assert!(direct.estimates_missing());
         finder.set_transforms(&twice);
         let dropped = direct.check_estimates(&finder.scene_lights().0);
-        let again = direct.estimate(&finder.scene_lights().0, 16, || false);
+        let again = direct.estimate(&finder.scene_lights().0, 16, || false, &NoProgress);
         let kept = direct.keyed_estimates();
         direct.forget_estimates();
-        let all = direct.estimate(&finder.scene_lights().0, 4096, || false);
+        let all = direct.estimate(&finder.scene_lights().0, 4096, || false, &NoProgress);
         assert_eq!(kept, direct.keyed_estimates());
         assert!(dropped > 0 && again < all, "{dropped} dropped, {again} of {all} estimated again");
     }
@@ -649,10 +665,10 @@ mod tests {
         let slot: EdgeIndexSlot = Arc::default();
         let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
         let none: HashMap<TripleKey, ()> = HashMap::new();
-        let mut a = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        let mut a = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress), Box::new(NoProgress));
         run_until(&mut a, &scene, &t, &none, |st, _| st.trees);
         let first = slot.get().unwrap().clone();
-        let mut b = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress));
+        let mut b = SessionEdges::new(scene.clone(), slot.clone(), Box::new(NoProgress), Box::new(NoProgress));
         run_until(&mut b, &scene, &t, &none, |st, _| st.trees);
         assert!(Arc::ptr_eq(&first, slot.get().unwrap()));
     }

@@ -319,6 +319,7 @@ impl FrameLoop {
                 p.scene.clone(),
                 p.edge_index.clone(),
                 Box::new(super::ViewerProgress::new(out.clone(), "edge trees", &format!("session {}: edge trees", &p.id[..p.id.len().min(8)]))),
+                Box::new(super::ViewerProgress::new(out.clone(), "discontinuity mesh", &format!("session {}: discontinuity mesh", &p.id[..p.id.len().min(8)]))),
             ),
             edges: Vec::new(),
             edge_stats: EdgeSourceStats::default(),

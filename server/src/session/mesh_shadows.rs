@@ -12,12 +12,12 @@
 //! few thousand of 70,000 edges are estimated again, not all.
 use crate::dmesh::geometry::Geometry;
 use crate::dmesh::grid::Grid;
-use crate::dmesh::{area_lights_indexed, DiscontinuityMesh, GRID_TRIANGLES_PER_VOXEL};
+use crate::dmesh::{area_lights_indexed, tolerance, DiscontinuityMesh, ProgressSteps, GRID_TRIANGLES_PER_VOXEL};
 use crate::edges::mesh_edges::{receivers_shadow_edges, Decisions, MeshEdgeCounts, MeshShadowEdge, Moved, OldDecisions};
 use crate::edges::shadow::daffine;
 use crate::edges::simplify::{self, Estimate, Estimated, Job, Rules, SceneLights};
 use crate::edges::EdgeSegment;
-use edgepoint_scene::Scene;
+use edgepoint_scene::{NoProgress, Progress, Scene};
 use glam::{Affine3A, DVec3, Vec3};
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
@@ -57,7 +57,8 @@ pub struct MeshShadows {
 impl MeshShadows {
     /// The mesh of `scene`'s area lights with its objects at `transforms`; `None` when the
     /// scene has no area light (nothing to mesh).
-    pub fn build(scene: &Scene, transforms: &[Affine3A]) -> Option<MeshShadows> {
+    /// `progress` hears of the receivers meshed and then of their shadow edges made.
+    pub fn build(scene: &Scene, transforms: &[Affine3A], progress: &dyn Progress) -> Option<MeshShadows> {
         let (scene_light, lights): (Vec<u32>, Vec<_>) = area_lights_indexed(scene).into_iter().unzip();
         if lights.is_empty() {
             return None;
@@ -65,9 +66,12 @@ impl MeshShadows {
         let t = Instant::now();
         let geometry = Geometry::from_scene_at(scene, transforms);
         let grid = Grid::build(&geometry, GRID_TRIANGLES_PER_VOXEL);
-        let mesh = DiscontinuityMesh::compute(&geometry, &grid, &lights);
+        let mesh = DiscontinuityMesh::compute_reporting(&geometry, &grid, &lights, tolerance(&geometry), None, progress);
         let mut m = MeshShadows { geometry, grid, mesh, transforms: transforms.to_vec(), scene_light, by_receiver: BTreeMap::new(), missing: 0, unchecked: Vec::new(), rules: Rules::new() };
-        m.refresh_edges(&m.mesh.receiver_ids(), None);
+        let receivers = m.mesh.receiver_ids();
+        progress.begin("shadow edges of the receivers", receivers.len() as u64);
+        m.refresh_edges(&receivers, None, progress);
+        progress.end();
         tracing::info!(
             lights = m.mesh.lights.len(),
             triangles = m.geometry.tris.len(),
@@ -115,7 +119,7 @@ impl MeshShadows {
             changed.sort_unstable();
             changed.dedup();
             let mv = one.as_ref().map(|(old, object, boxes)| Moved { old, object: *object, boxes: *boxes });
-            self.refresh_edges(&changed, mv.as_ref());
+            self.refresh_edges(&changed, mv.as_ref(), &NoProgress);
             tracing::debug!(objects = moved, receivers_changed = changed.len(), shadow_edges = self.edge_count(), ms = t.elapsed().as_secs_f64() * 1e3, "mesh shadow edges after a move");
         }
         moved > 0
@@ -157,7 +161,9 @@ impl MeshShadows {
     /// across moves are checked against the moved boxes, and those a move can have changed
     /// are dropped. What was estimated stays for the next call, also across moves that do
     /// not reach it. Returns how many were estimated.
-    pub fn estimate(&mut self, scene: &SceneLights, chunk: usize, stop: impl Fn() -> bool) -> usize {
+    /// `progress` hears of each chunk done (its stage begun and ended by the caller, as the
+    /// estimates may take several calls).
+    pub fn estimate(&mut self, scene: &SceneLights, chunk: usize, stop: impl Fn() -> bool, progress: &dyn Progress) -> usize {
         self.check_estimates(scene);
         // Where the estimates are missing, in publishing order.
         let todo: Vec<((u32, u32), usize)> = self.by_receiver.iter().flat_map(|(k, r)| r.errors.iter().enumerate().filter(|(_, e)| e.is_none()).map(move |(i, _)| (*k, i))).collect();
@@ -175,8 +181,14 @@ impl MeshShadows {
             }
             self.missing -= at.len();
             n += at.len();
+            progress.advance(at.len() as u64);
         }
         n
+    }
+
+    /// How many edges have no estimate (or one to check against a move).
+    pub fn estimates_to_make(&self) -> usize {
+        self.missing
     }
 
     /// Every edge's identity with its estimate's bits, sorted (to compare two meshes'
@@ -222,12 +234,12 @@ impl MeshShadows {
     /// Makes the shadow edges of `receivers` again (the others' are as they were), after
     /// `moved` moved if given. An edge made the same as before keeps its estimate, to be
     /// checked against the move ([`Self::estimate`]).
-    fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>) {
+    fn refresh_edges(&mut self, receivers: &[(u32, u32)], moved: Option<&Moved>, progress: &dyn Progress) {
         let (mut counts, mut kept) = (MeshEdgeCounts::default(), 0);
         let by = &self.by_receiver;
         let own = moved.map(|m| m.old.object_tris(m.object));
         let old = |(l, t): (u32, u32)| by.get(&(l, t)).filter(|_| !own.as_ref().is_some_and(|o| o.contains(&t))).map(|e| &e.decisions);
-        let made = receivers_shadow_edges(&self.mesh, &self.geometry, receivers, moved.map(|m| (m, &old as &OldDecisions<'_>)));
+        let made = receivers_shadow_edges(&self.mesh, &self.geometry, receivers, moved.map(|m| (m, &old as &OldDecisions<'_>)), &ProgressSteps::new(progress));
         for (r, e) in receivers.iter().zip(made) {
             counts = counts + e.counts;
             kept += e.kept;
@@ -253,4 +265,53 @@ fn edge_key(e: &MeshShadowEdge) -> EdgeKey {
     let [a, b] = [e.edge.a, e.edge.b].map(|p| p.to_array().map(f32::to_bits));
     let [c, d] = [e.blocker.0, e.blocker.1].map(|p| p.to_array().map(f64::to_bits));
     (e.light, e.edge.object, e.edge.kind as u8, [a[0], a[1], a[2], b[0], b[1], b[2]], [c[0], c[1], c[2], d[0], d[1], d[2]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    /// Every report, in order: (stage begun, its total) or units advanced or an end.
+    #[derive(Default)]
+    struct Recorded(Mutex<Vec<(String, u64)>>);
+
+    impl Progress for Recorded {
+        fn begin(&self, stage: &str, total: u64) {
+            self.0.lock().unwrap().push((stage.to_string(), total));
+        }
+        fn advance(&self, units: u64) {
+            self.0.lock().unwrap().push(("+".into(), units));
+        }
+        fn end(&self) {
+            self.0.lock().unwrap().push(("end".into(), 0));
+        }
+    }
+
+    /// The build reports its two stages, each begun with its total, advanced by no more
+    /// than that and ended; the mesh is the one a computation that reports nothing makes.
+    #[test]
+    fn the_mesh_build_reports_its_receivers_and_their_edges() {
+        let scene = edgepoint_scene::builtin::load("rooms").unwrap();
+        let t: Vec<Affine3A> = scene.objects.iter().map(|o| o.transform).collect();
+        let rec = Recorded::default();
+        let m = MeshShadows::build(&scene, &t, &rec).expect("rooms has area lights");
+        let quiet = DiscontinuityMesh::compute(&m.geometry, &m.grid, &m.mesh.lights);
+        assert_eq!(crate::dmesh::update::mismatches(&m.mesh, &quiet), 0);
+        let log = rec.0.into_inner().unwrap();
+        let stages: Vec<(usize, &(String, u64))> = log.iter().enumerate().filter(|(_, (s, _))| s != "+" && s != "end").collect();
+        let pairs = (m.mesh.lights.len() * m.geometry.tris.len()) as u64;
+        let receivers = m.mesh.receiver_ids().len() as u64;
+        assert_eq!(stages.iter().map(|(_, s)| (*s).clone()).collect::<Vec<_>>(), vec![("light-triangle pairs".to_string(), pairs), ("shadow edges of the receivers".to_string(), receivers)]);
+        for (k, &(at, _)) in stages.iter().enumerate() {
+            let until = stages.get(k + 1).map_or(log.len(), |s| s.0);
+            let body = &log[at + 1..until];
+            assert_eq!(body.last().map(|s| s.0.as_str()), Some("end"), "stage {k} ended");
+            let advanced: u64 = body.iter().filter(|s| s.0 == "+").map(|s| s.1).sum();
+            let total = stages[k].1 .1;
+            // Whole steps only, the last part of a step left to the end.
+            assert!(advanced <= total && total - advanced < crate::dmesh::PROGRESS_STEP, "stage {k}: {advanced} of {total}");
+            assert!(body.iter().filter(|s| s.0 == "+").all(|s| s.1 == crate::dmesh::PROGRESS_STEP));
+        }
+    }
 }

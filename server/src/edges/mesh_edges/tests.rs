@@ -228,7 +228,7 @@ fn edges_kept_across_a_move_equal_edges_made_afresh() {
         let size = (g.bounds().1 - g.bounds().0).length();
         for i in 0..8 {
             let all = mesh.receiver_ids();
-            let before: std::collections::HashMap<(u32, u32), Decisions> = all.iter().copied().zip(receivers_shadow_edges(&mesh, &g, &all, None)).map(|(r, e)| (r, e.decisions)).collect();
+            let before: std::collections::HashMap<(u32, u32), Decisions> = all.iter().copied().zip(receivers_shadow_edges(&mesh, &g, &all, None, &ProgressSteps::new(&NoProgress))).map(|(r, e)| (r, e.decisions)).collect();
             let o = 1 + i % (objects - 1);
             let d = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * (0.05 * size);
             let new = g.moved(o, |p| p + d);
@@ -237,8 +237,8 @@ fn edges_kept_across_a_move_equal_edges_made_afresh() {
             let moved = Moved { old: &g, object: o, boxes: [g.object_bounds(o), new.object_bounds(o)] };
             let own = g.object_tris(o);
             let old = |(l, t): (u32, u32)| before.get(&(l, t)).filter(|_| !own.contains(&t));
-            let with = receivers_shadow_edges(&mesh, &new, &changed, Some((&moved, &old as &OldDecisions<'_>)));
-            let fresh = receivers_shadow_edges(&mesh, &new, &changed, None);
+            let with = receivers_shadow_edges(&mesh, &new, &changed, Some((&moved, &old as &OldDecisions<'_>)), &ProgressSteps::new(&NoProgress));
+            let fresh = receivers_shadow_edges(&mesh, &new, &changed, None, &ProgressSteps::new(&NoProgress));
             for ((r, a), b) in changed.iter().zip(&with).zip(&fresh) {
                 assert_eq!((a.counts, &a.edges), (b.counts, &b.edges), "receiver {r:?} after moving object {o} by {d}");
                 kept += a.kept;
