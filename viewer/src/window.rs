@@ -517,6 +517,11 @@ impl Ui {
                 crate::reconstruction::overlay_name(f.overlay),
                 if self.paused { "  PAUSED" } else { "" }
             ));
+            // Long work that goes on while frames show (the discontinuity mesh's build and
+            // estimates: a minute on `rooms`), one line per stage until it is done.
+            for p in self.progress.values().filter(|p| p.total > 0 && p.done < p.total) {
+                lines.extend(wrap(&[format!("{}: {}/{} {}", p.stage, p.done, p.total, p.message)], cols));
+            }
             c.panel(4, 4, &lines, WHITE);
         }
         if self.show_help {
@@ -646,6 +651,16 @@ mod tests {
         // The stats panel darkens the top-left corner and writes over it; the rest is the frame.
         assert!(buf[..200 * 12].contains(&0xffffff) && buf[5 * 200 + 5] != 0x808080);
         assert_eq!(buf[149 * 200 + 199], 0x808080);
+        // A stage still going shows as one more line of the panel, until it is done.
+        let panel_rows = |buf: &[u32]| (0..150).filter(|y| buf[y * 200 + 5] != 0x808080).count();
+        let before = panel_rows(&buf);
+        u.receive(ToWindow::Progress(pb::Progress { stage: "discontinuity mesh".into(), done: 10, total: 100, message: "light-triangle pairs".into() }));
+        u.compose(&mut buf);
+        assert_eq!(panel_rows(&buf), before + crate::hud::LINE, "one line more");
+        u.receive(ToWindow::Progress(pb::Progress { stage: "discontinuity mesh".into(), done: 100, total: 100, message: "light-triangle pairs done".into() }));
+        u.receive(ToWindow::Progress(pb::Progress { stage: "workers".into(), done: 2, total: 2, message: "scene loaded".into() }));
+        u.compose(&mut buf);
+        assert_eq!(panel_rows(&buf), before - crate::hud::LINE, "the workers' line gone too, once done");
         u.show_stats = false;
         u.compose(&mut buf);
         assert!(buf.iter().all(|&p| p == 0x808080), "Tab hides it");
