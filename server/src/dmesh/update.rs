@@ -160,7 +160,7 @@ impl DiscontinuityMesh {
         let (lights, silhouettes) = (&self.lights, &silhouettes);
         // Every light's receivers in one parallel pass: a small object's work is a few
         // hundred receivers a light, too little to keep two threads busy light by light.
-        let stats = self
+        let (stats, list, receiver_costs) = self
             .meshes
             .par_iter_mut()
             .enumerate()
@@ -206,7 +206,6 @@ impl DiscontinuityMesh {
                     (a + b, v, c)
                 },
             );
-        let (stats, list, receiver_costs) = (stats.0, stats.1, stats.2);
         changed.extend(list);
         if let Some(costs) = costs {
             costs.extend(receiver_costs);
