@@ -298,6 +298,9 @@ struct Pool {
     stamp: Vec<u64>,
     /// Samples of the same surface point averaged into `shade.color` (`converge.rs`).
     samples: Vec<u16>,
+    /// How much moves have shifted the point's shadows since it was shaded, as far as they
+    /// could say (`reshadow.rs`), in 1/255 of one light's unblocked light.
+    drift: Vec<u8>,
     /// The spread of those samples (`converge.rs`, [`RenderCache::noise_gains`]): the mean of
     /// their [`converge::tone`] and the sum of its squared deviations (Welford).
     spread: Vec<[f32; 2]>,
@@ -407,7 +410,7 @@ impl RenderCache {
         use std::mem::size_of;
         let pixels = width as usize * height as usize;
         let capacity = capacity_for(pixels, points_per_pixel);
-        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8 + 2 + size_of::<[f32; 2]>();
+        let pool = 3 * 4 + 3 * 2 + size_of::<Shade>() + 4 + 8 + size_of::<[u32; 2]>() + 1 + 8 + 2 + 1 + size_of::<[f32; 2]>();
         // Projections, the free lists and the oldest-first queues (reserved at 2 entries per
         // slot plus 64 per region).
         let per_point = pool + size_of::<Projected>() + 4 + 2 * size_of::<(u64, u32)>();
@@ -441,6 +444,7 @@ impl RenderCache {
             flags: vec![0; capacity],
             stamp: vec![0; capacity],
             samples: vec![0; capacity],
+            drift: vec![0; capacity],
             spread: vec![[0.0; 2]; capacity],
         };
         // Region of band b: slots in proportion to the pixels before the band.
@@ -538,6 +542,7 @@ impl RenderCache {
         p.pixel[i] = s.pixel;
         p.flags[i] = FLAG_VALID | if s.hit { FLAG_HIT } else { 0 } | if stale { FLAG_STALE } else { 0 };
         p.samples[i] = 1;
+        p.drift[i] = 0;
         p.spread[i] = [converge::tone(s.color), 0.0];
         p.stamp[i] = self.next_stamp;
         // Not part of the last frame: never taken for a hidden point.
@@ -811,6 +816,8 @@ impl RenderCache {
                 let n = (normal_matrix * Vec3::new(unorm(p.nx[i]), unorm(p.ny[i]), unorm(p.nz[i]))).normalize_or_zero();
                 (p.nx[i], p.ny[i], p.nz[i]) = (snorm16(n.x), snorm16(n.y), snorm16(n.z));
                 p.flags[i] |= FLAG_STALE;
+                // Stale for its own move, not for a shadow's: no longer judged by `reshadow`.
+                p.drift[i] = 0;
                 moved += 1;
             }
         }

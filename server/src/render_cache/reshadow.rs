@@ -21,14 +21,31 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// What a move did to one point's shading from one light.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ShadowChange {
     /// Its shadow from the moved object is the same: its shading stays right.
     Unchanged,
+    /// Changed by about this fraction of one light's unblocked light (summed over lights):
+    /// kept, marked stale, while its shifts since it was shaded add up to less than
+    /// [`DROP_DRIFT`]; dropped once they reach it.
+    Shifted(f32),
     /// May have changed, cannot say (an area light, or no exact test for the object).
     Unknown,
     /// Changed: the point now shows a shadow that is not there, or misses one that is.
     Changed,
+}
+
+/// A point whose shadows moves have shifted by this much since it was shaded (in one
+/// light's unblocked light, [`ShadowChange::Shifted`] summed over moves: at least the shift
+/// between its shading and now) is dropped rather than shown stale: a quarter of a light is
+/// an outlier where that light dominates (the motion benchmark's outliers are 64 of 255
+/// sRGB levels), smaller shifts are closer to the truth shown than interpolated from afar
+/// while the object keeps moving and its whole penumbra shifts every frame.
+pub const DROP_DRIFT: f32 = 0.25;
+
+/// [`DROP_DRIFT`] and shifts in the cache's per-point units (1/255 of a light).
+fn drift_units(f: f32) -> u32 {
+    (f.max(0.0) * 255.0).round().min(255.0) as u32
 }
 
 /// The exact question a move asks about a point: `change(p, light)` for the point `p` and
@@ -67,15 +84,45 @@ pub fn verdict(p: Vec3, boxes: &[(Vec3, Vec3, Vec3)], query: &dyn ShadowQuery) -
 /// first [`ShadowChange::Changed`].
 #[inline]
 pub fn worst_change(p: Vec3, lights: impl Iterator<Item = usize>, query: &dyn ShadowQuery) -> ShadowChange {
-    let mut worst = ShadowChange::Unchanged;
+    let mut worst = Worst::default();
     for l in lights {
-        match query.change(p, l) {
-            ShadowChange::Changed => return ShadowChange::Changed,
-            ShadowChange::Unknown => worst = ShadowChange::Unknown,
-            ShadowChange::Unchanged => {}
+        if worst.add(query.change(p, l)) {
+            break;
         }
     }
-    worst
+    worst.answer()
+}
+
+/// The worst of several answers for one point (lights, or moves): [`ShadowChange::Changed`]
+/// over everything, shifts summed, then unknown, then unchanged.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Worst {
+    changed: bool,
+    unknown: bool,
+    shift: Option<f32>,
+}
+
+impl Worst {
+    /// Takes one more answer in; returns whether the point changed (no answer can be worse).
+    pub fn add(&mut self, c: ShadowChange) -> bool {
+        match c {
+            ShadowChange::Changed => self.changed = true,
+            ShadowChange::Shifted(f) => self.shift = Some(self.shift.unwrap_or(0.0) + f),
+            ShadowChange::Unknown => self.unknown = true,
+            ShadowChange::Unchanged => {}
+        }
+        self.changed
+    }
+
+    pub fn answer(self) -> ShadowChange {
+        // A shift says how much where an unknown part says nothing (both mark the point stale).
+        match (self.changed, self.shift, self.unknown) {
+            (true, _, _) => ShadowChange::Changed,
+            (false, Some(f), _) => ShadowChange::Shifted(f),
+            (false, None, true) => ShadowChange::Unknown,
+            (false, None, false) => ShadowChange::Unchanged,
+        }
+    }
 }
 
 /// Per light: its centre and `region` grown by its radius (what [`verdict`] tests first).
@@ -92,8 +139,11 @@ impl RenderCache {
     /// `query` ([`verdict`]). Changed: dropped (its slot freed). Unknown: marked stale (with
     /// [`NoExactAnswer`], every such point: [`RenderCache::age_shadowed_by`]). Unchanged: left
     /// as it is.
+    /// Shifted: marked stale, its drift (the shifts since it was shaded) grown by it, and
+    /// dropped once that reaches [`DROP_DRIFT`].
     /// Points already stale stay stale (shaded at some earlier state, they cannot be
-    /// judged against the last one). Call after [`RenderCache::move_object`], which marks
+    /// judged against the last one), except those made stale by shifts: their drift goes on
+    /// adding up (the sum of the shifts bounds the change since their shading). Call after [`RenderCache::move_object`], which marks
     /// the moved object's own points stale.
     pub fn reshadow(&mut self, region: (Vec3, Vec3), lights: &[LightBound], query: &dyn ShadowQuery) -> Reshadowed {
         if lights.is_empty() || !(region.0.cmple(region.1).all()) {
@@ -108,19 +158,34 @@ impl RenderCache {
         let (dropped, stale) = p
             .flags
             .par_chunks_mut(CHUNK)
+            .zip(p.drift.par_chunks_mut(CHUNK))
             .zip(p.px.par_chunks(CHUNK).zip(p.py.par_chunks(CHUNK)).zip(p.pz.par_chunks(CHUNK)))
             .enumerate()
-            .map(|(c, (flags, ((xs, ys), zs)))| {
+            .map(|(c, ((flags, drift), ((xs, ys), zs)))| {
                 let (mut out, mut stale) = (Vec::new(), 0u32);
                 for k in 0..flags.len() {
-                    if flags[k] & (FLAG_VALID | FLAG_HIT | FLAG_STALE) != FLAG_VALID | FLAG_HIT {
+                    let judged = flags[k] & (FLAG_VALID | FLAG_HIT | FLAG_STALE) == FLAG_VALID | FLAG_HIT || (flags[k] & (FLAG_VALID | FLAG_HIT) == FLAG_VALID | FLAG_HIT && drift[k] > 0);
+                    if !judged {
                         continue;
                     }
+                    let was_stale = flags[k] & FLAG_STALE != 0;
                     match verdict(Vec3::new(xs[k], ys[k], zs[k]), &boxes, query) {
                         ShadowChange::Unchanged => {}
                         ShadowChange::Unknown => {
                             flags[k] |= FLAG_STALE;
-                            stale += 1;
+                            stale += u32::from(!was_stale);
+                        }
+                        ShadowChange::Shifted(f) => {
+                            // At least one unit: a shift too small to count still marks the
+                            // point as judged by shifts.
+                            let d = u32::from(drift[k]) + drift_units(f).max(1);
+                            if d >= drift_units(DROP_DRIFT) {
+                                out.push((c * CHUNK + k) as u32);
+                            } else {
+                                drift[k] = d as u8;
+                                flags[k] |= FLAG_STALE;
+                                stale += u32::from(!was_stale);
+                            }
                         }
                         ShadowChange::Changed => out.push((c * CHUNK + k) as u32),
                     }

@@ -1132,14 +1132,17 @@ fn floor_shade_area(mesh: &edgepoint_scene::Mesh, t: &glam::Affine3A, light: &ed
     Vec3::splat((left / free) as f32)
 }
 
-/// An area light's soft shadow, moved: the blocker of the point-light test slides under a
-/// square light. After the move no point shaded under the old shadow is shown where its
-/// shading is now wrong (those were the old soft shadow's dark speckles), every point kept
-/// is fresh and right for the new place, and the points outside the object's penumbrae in
-/// both places (lit in both, or in both umbrae) are kept.
+/// An area light's soft shadow, moved twice: the blocker of the point-light test slides
+/// under a square light, 0.2 and again 0.2 along x. After each move every point shown fresh
+/// is exact for the new place; a point whose shading the moves shifted by less than
+/// [`DROP_DRIFT`] of the light in all (the shifts summed over both moves: a point made stale
+/// by the first is judged again by the second) is shown stale and is off by no more than
+/// that; the others are dropped (those were the old soft shadow's dark speckles). Points lit
+/// in both places or in both umbrae stay fresh.
 #[test]
-fn a_move_drops_the_points_whose_area_light_shading_it_changed_and_keeps_the_others_fresh() {
+fn a_move_keeps_points_it_shifted_a_little_stale_and_drops_the_others() {
     use crate::edges::face_bvh::FaceBvh;
+    use crate::render_cache::reshadow::DROP_DRIFT;
     use crate::session::move_shadows::{convex_solids, Exact, MoveQuery};
     use edgepoint_scene::backprojection::LightPlane;
     let (w, h) = (48u32, 48u32);
@@ -1152,27 +1155,38 @@ fn a_move_drops_the_points_whose_area_light_shading_it_changed_and_keeps_the_oth
     let corners = vec![Vec3::new(-a, 2.0, -a), Vec3::new(a, 2.0, -a), Vec3::new(a, 2.0, a), Vec3::new(-a, 2.0, a)];
     let plane = LightPlane::new(&corners).unwrap();
     assert!(plane.n.y < 0.0, "the light faces down");
-    let (from, to) = (glam::Affine3A::IDENTITY, glam::Affine3A::from_translation(Vec3::new(0.4, 0.0, 0.0)));
-    let mut c = floor_points(&cam, 13, |p| floor_shade_area(&slab, &from, &plane, p));
+    let places = [0.0f32, 0.2, 0.4].map(|x| glam::Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)));
+    let mut c = floor_points(&cam, 13, |p| floor_shade_area(&slab, &places[0], &plane, p));
     let lights = [LightBound { center: Vec3::new(0.0, 2.0, 0.0), radius: a * std::f32::consts::SQRT_2 }];
     let areas = [Some(plane.clone())];
     let region = (Vec3::new(-0.5, 0.99, -0.5), Vec3::new(0.9, 1.01, 0.5));
-    let r = c.reshadow(region, &lights, &MoveQuery::new(Some(&exact), &slab, &from, &to, &lights, &areas));
-    frame(&mut c, &cam);
-    let pi = c.point_image();
-    let (mut shown, mut dark, mut lit) = (0, 0, 0);
-    for i in 0..(w * h) as usize {
-        if pi.point[i] == NO_POINT {
-            continue;
+    let (mut dropped, mut stale_total) = (0, 0);
+    for k in 1..places.len() {
+        let r = c.reshadow(region, &lights, &MoveQuery::new(Some(&exact), &slab, &places[k - 1], &places[k], &lights, &areas));
+        dropped += r.dropped;
+        frame(&mut c, &cam);
+        let pi = c.point_image();
+        let (mut shown, mut stale, mut dark, mut lit) = (0, 0, 0, 0);
+        for i in 0..(w * h) as usize {
+            if pi.point[i] == NO_POINT {
+                continue;
+            }
+            let want = floor_shade_area(&slab, &places[k], &plane, c.point(pi.point[i]).unwrap().position);
+            let off = (pi.color[i] - want).abs().max_element();
+            if pi.age[i] < STALE_AGE {
+                assert!(off < 1e-5, "move {k}, pixel {i}: shown fresh {} but {} in the new place", pi.color[i], want);
+                dark += usize::from(want.x < 1e-6);
+                lit += usize::from(want.x > 1.0 - 1e-6);
+            } else {
+                // The drift is kept in 1/255 of the light, rounded.
+                assert!(off <= DROP_DRIFT + 1.0 / 255.0, "move {k}, pixel {i}: shown stale {} but {} in the new place", pi.color[i], want);
+                stale += 1;
+            }
+            shown += 1;
         }
-        let want = floor_shade_area(&slab, &to, &plane, c.point(pi.point[i]).unwrap().position);
-        assert!((pi.color[i] - want).abs().max_element() < 1e-5, "pixel {i}: shown {} but {} in the new place", pi.color[i], want);
-        assert!(pi.age[i] < STALE_AGE, "pixel {i}: stale");
-        shown += 1;
-        dark += usize::from(want.x < 1e-6);
-        lit += usize::from(want.x > 1.0 - 1e-6);
+        assert!(dark > 20 && lit > (w * h) as usize / 2 && shown > (w * h) as usize / 2, "move {k}: {shown} shown: {dark} in both umbrae, {lit} lit in both");
+        stale_total += stale;
     }
-    assert_eq!(r.stale, 0, "an exact answer everywhere");
-    assert!(r.dropped > 100, "{} dropped", r.dropped);
-    assert!(dark > 20 && lit > (w * h) as usize / 2 && shown > (w * h) as usize / 2, "{shown} shown: {dark} in both umbrae, {lit} lit in both");
+    assert!(dropped > 100, "{dropped} dropped");
+    assert!(stale_total > 20, "{stale_total} shown stale: some points shifted a little");
 }

@@ -21,7 +21,7 @@ use super::{Input, SessionParams};
 use super::edge_source::{EdgeSourceStats, SessionEdges};
 use super::memory::{ring_capacity, MemoryGrant, SessionMemory};
 use super::move_shadows::{place_solids, MoveQuery, MoveShadows, PlacedSolids};
-use crate::render_cache::reshadow::{worst_change, ShadowChange};
+use crate::render_cache::reshadow::{worst_change, ShadowChange, Worst, DROP_DRIFT};
 use crate::edges::finder::ViewVolume;
 use crate::edges::EdgeSegment;
 use crate::encode::{effective_encoding, FrameEncoder};
@@ -793,7 +793,11 @@ impl FrameLoop {
                                 self.counters.shadow_changed += 1;
                                 continue;
                             }
-                            ShadowChange::Unknown => stale = true,
+                            ShadowChange::Shifted(f) if f >= DROP_DRIFT => {
+                                self.counters.shadow_changed += 1;
+                                continue;
+                            }
+                            ShadowChange::Unknown | ShadowChange::Shifted(_) => stale = true,
                             ShadowChange::Unchanged => {}
                         }
                     }
@@ -859,7 +863,7 @@ impl FrameLoop {
             return ShadowChange::Unknown;
         }
         let since = || self.recent_moves.iter().filter(|m| m.epoch > epoch);
-        let mut worst = ShadowChange::Unchanged;
+        let mut worst = Worst::default();
         for (k, m) in since().enumerate() {
             // Each object once, at its first move since `epoch`: its place then was `from`.
             if since().take(k).any(|e| e.object == m.object) {
@@ -871,13 +875,11 @@ impl FrameLoop {
             // A segment that misses every box the object swept since then cannot have
             // changed (both its places are in them): no exact test needed.
             let swept = (0..self.lights.len()).filter(|&l| since().filter(|e| e.object == m.object).any(|e| self.lights[l].may_shadow(p, e.region)));
-            match worst_change(p, swept, &query) {
-                ShadowChange::Changed => return ShadowChange::Changed,
-                ShadowChange::Unknown => worst = ShadowChange::Unknown,
-                ShadowChange::Unchanged => {}
+            if worst.add(worst_change(p, swept, &query)) {
+                break;
             }
         }
-        worst
+        worst.answer()
     }
 
     /// Builds ray batches for the picked pixels and submits them, or as many as
