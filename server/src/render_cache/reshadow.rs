@@ -2,8 +2,10 @@
 //! 1 of a frame), decided exactly where it can be.
 //!
 //! A point whose segment toward a light crosses the moved object's old or new box *may* be
-//! shadowed differently now. For an area light that is all the cache can say: the point is
-//! marked stale (re-shaded first, shown meanwhile). For a point light it can say more: the
+//! shadowed differently now. Where nothing more can be said the point is marked stale
+//! (re-shaded first, shown meanwhile). For an area light and an object of convex solids the
+//! session says by how much ([`ShadowChange::Shifted`]): small shifts, added up per point,
+//! keep it stale, large ones drop it. For a point light it can say more: the
 //! point's shadow from the moved object changed exactly when the segment from the point to
 //! the light meets the object in one place and not in the other — a question about the
 //! object's triangles that the session answers ([`ShadowQuery`]). Where it did not change,

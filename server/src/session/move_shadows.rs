@@ -11,11 +11,14 @@
 //! An area light's shading at `p` depends on the part of the light visible from `p` (paper
 //! 002 §1's backprojection). The object alone hides nothing of it, part of it, or all of it
 //! ([`hidden_by`]). Hiding nothing in both places, or all of it in both (the light
-//! contributes nothing either way), the point's shading is unchanged; otherwise it changed
-//! — also where the object's shadow merely moved within the penumbra — and the point is
-//! dropped. (Before, every point the swept box could shadow was marked stale and shown until
-//! re-shaded: where the old soft shadow lay, its dark points stayed as speckles for 10–20
-//! frames.) The test is exact and cheap for objects made of convex closed solids (boxes,
+//! contributes nothing either way), the point's shading is unchanged; otherwise it shifted
+//! by at most the share of the light hidden in one place only ([`shift_by`]), which the
+//! cache adds up per point: a little (the object's penumbra moving on as it moves), the
+//! point is shown stale; much (an old umbra now lit), it is dropped. (Before stop 38, every
+//! point the swept box could shadow was marked stale and shown until re-shaded: where the
+//! old soft shadow lay, its dark points stayed as speckles for 10–20 frames; at stop 38
+//! every changed point was dropped, and the penumbra of an object that kept moving stayed
+//! empty.) The test is exact and cheap for objects made of convex closed solids (boxes,
 //! spheres, a chair's parts: each solid's shadow is one convex polygon, subtracted once);
 //! other objects' points are marked stale as before (a torus's hundreds of triangles per
 //! point made a frame in motion take seconds).
