@@ -172,12 +172,19 @@ pub fn whole_light(light: &LightPlane, p: Vec3) -> Option<Visible<'_>> {
 /// of those, between the point and the light).
 pub fn hidden_by(solids: &PlacedSolids, mut vis: Visible) -> Hidden {
     let hid = occlude_by_solids(solids, &mut vis);
-    if vis.is_empty() {
-        Hidden::All
-    } else if hid {
-        Hidden::Part
-    } else {
-        Hidden::Nothing
+    Hidden::after(hid, &vis)
+}
+
+impl Hidden {
+    /// What an occlusion that hid something (`hid`) or nothing left of the light: `vis`.
+    pub fn after(hid: bool, vis: &Visible) -> Hidden {
+        if vis.is_empty() {
+            Hidden::All
+        } else if hid {
+            Hidden::Part
+        } else {
+            Hidden::Nothing
+        }
     }
 }
 
@@ -442,13 +449,7 @@ mod tests {
                     for f in 0..mesh.triangles.len() {
                         hid |= v.occlude(mesh.triangle(f).map(|x| t.transform_point3(x).as_dvec3()));
                     }
-                    if v.is_empty() {
-                        Hidden::All
-                    } else if hid {
-                        Hidden::Part
-                    } else {
-                        Hidden::Nothing
-                    }
+                    Hidden::after(hid, &v)
                 });
                 assert_eq!(got, want, "{name}: point {p}, move {k}");
                 counts[want as usize] += 1;
