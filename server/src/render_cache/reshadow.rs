@@ -27,11 +27,11 @@ use rayon::prelude::*;
 pub enum ShadowChange {
     /// Its shadow from the moved object is the same: its shading stays right.
     Unchanged,
-    /// Changed by about this fraction of one light's unblocked light (summed over lights):
+    /// Changed by at most this fraction of one light's unblocked light (summed over lights):
     /// kept, marked stale, while its shifts since it was shaded add up to less than
     /// [`DROP_DRIFT`]; dropped once they reach it.
     Shifted(f32),
-    /// May have changed, cannot say (an area light, or no exact test for the object).
+    /// May have changed, cannot say (no exact test for the object and this light).
     Unknown,
     /// Changed: the point now shows a shadow that is not there, or misses one that is.
     Changed,
@@ -145,8 +145,8 @@ impl RenderCache {
     /// dropped once that reaches [`DROP_DRIFT`].
     /// Points already stale stay stale (shaded at some earlier state, they cannot be
     /// judged against the last one), except those made stale by shifts: their drift goes on
-    /// adding up (the sum of the shifts bounds the change since their shading). Call after [`RenderCache::move_object`], which marks
-    /// the moved object's own points stale.
+    /// adding up (the sum of the shifts bounds the change since their shading). Call after
+    /// [`RenderCache::move_object`], which marks the moved object's own points stale.
     pub fn reshadow(&mut self, region: (Vec3, Vec3), lights: &[LightBound], query: &dyn ShadowQuery) -> Reshadowed {
         if lights.is_empty() || !(region.0.cmple(region.1).all()) {
             return Reshadowed::default();
