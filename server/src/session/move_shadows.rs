@@ -226,9 +226,19 @@ pub fn shift_by(from: &PlacedSolids, to: &PlacedSolids, vis: Visible) -> Option<
         return None;
     }
     let (eb, ea) = (before.irradiance(), after.irradiance());
-    occlude_by_solids(to, &mut before);
-    // E(hidden in one place only) = E(L − A) + E(L − B) − 2 E(L − A − B).
-    let differ = (eb + ea - 2.0 * before.irradiance()).max(0.0);
+    // E(hidden in one place only) = E(L − A) + E(L − B) − 2 E(L − A − B); L − A − B without
+    // a third pass where one place hid nothing (it is the other's) or everything (empty).
+    let both = if !hid_before {
+        ea
+    } else if !hid_after {
+        eb
+    } else if before.is_empty() || after.is_empty() {
+        0.0
+    } else {
+        occlude_by_solids(to, &mut before);
+        before.irradiance()
+    };
+    let differ = (eb + ea - 2.0 * both).max(0.0);
     Some(if whole > 0.0 { (differ / whole).min(1.0) } else { 0.0 })
 }
 
