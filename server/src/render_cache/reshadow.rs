@@ -153,6 +153,7 @@ impl RenderCache {
         }
         self.point_image_from = None;
         let boxes = light_boxes(region, lights);
+        let drop_at = drift_units(DROP_DRIFT);
         let p = &mut self.pool;
         const CHUNK: usize = 4096;
         // Decided in parallel (the flags of stale points set there); the drops are applied
@@ -166,11 +167,11 @@ impl RenderCache {
             .map(|(c, ((flags, drift), ((xs, ys), zs)))| {
                 let (mut out, mut stale) = (Vec::new(), 0u32);
                 for k in 0..flags.len() {
-                    let judged = flags[k] & (FLAG_VALID | FLAG_HIT | FLAG_STALE) == FLAG_VALID | FLAG_HIT || (flags[k] & (FLAG_VALID | FLAG_HIT) == FLAG_VALID | FLAG_HIT && drift[k] > 0);
-                    if !judged {
+                    let was_stale = flags[k] & FLAG_STALE != 0;
+                    // Hit points, fresh or stale by shifts only.
+                    if flags[k] & (FLAG_VALID | FLAG_HIT) != FLAG_VALID | FLAG_HIT || was_stale && drift[k] == 0 {
                         continue;
                     }
-                    let was_stale = flags[k] & FLAG_STALE != 0;
                     match verdict(Vec3::new(xs[k], ys[k], zs[k]), &boxes, query) {
                         ShadowChange::Unchanged => {}
                         ShadowChange::Unknown => {
@@ -181,7 +182,7 @@ impl RenderCache {
                             // At least one unit: a shift too small to count still marks the
                             // point as judged by shifts.
                             let d = u32::from(drift[k]) + drift_units(f).max(1);
-                            if d >= drift_units(DROP_DRIFT) {
+                            if d >= drop_at {
                                 out.push((c * CHUNK + k) as u32);
                             } else {
                                 drift[k] = d as u8;

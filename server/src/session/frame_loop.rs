@@ -713,11 +713,12 @@ impl FrameLoop {
         self.last_move_epoch = self.epoch;
         // The object's points go with it (their shading is aged: it was computed in the old
         // place). Of the points it can shadow, in its old place or its new one, those whose
-        // shadow it changed (from a point light: its segment blocked in one place only; from
-        // an area light: the object hiding part of it in either place, or all in one only)
-        // are dropped (wrong now): prioritized sampling re-shades them first (DESIGN.md
-        // "Motion"). Objects without an exact test age them instead. The others are as right
-        // as before.
+        // shadow from a point light it changed (its segment blocked in one place only) are
+        // dropped (wrong now); from an area light and an object of convex solids, each
+        // point's light shifted by the share hidden in one place only, and a point is kept
+        // stale while its shifts add up to little, dropped beyond (`reshadow`). Prioritized
+        // sampling re-shades them first (DESIGN.md "Motion"). Objects without an exact test
+        // age them instead. The others are as right as before.
         self.cache.move_object(id, &from, &t);
         let bounds = self.scene.objects[id as usize].mesh.bounds;
         let (a, b) = (transformed_box(&from, bounds), transformed_box(&t, bounds));
@@ -852,12 +853,12 @@ impl FrameLoop {
     }
 
     /// What the moves since `epoch` did to the shadows at `p`, a point on an object that has
-    /// not moved since: [`ShadowChange::Changed`] where an object that moved shadows it
-    /// differently in its place at `epoch` and now (exact, with the object's triangles: a
-    /// point light's segment blocked in one place only; an area light partly hidden by the
-    /// object's convex solids in either place, or wholly in one only);
-    /// [`ShadowChange::Unknown`] for an object without an exact test, or when the moves since
-    /// `epoch` are no longer all remembered.
+    /// not moved since: [`ShadowChange::Changed`] where an object that moved blocks a point
+    /// light's segment in its place at `epoch` and not now, or now and not then (exact, with
+    /// the object's triangles); [`ShadowChange::Shifted`] by the share of an area light its
+    /// convex solids hide in one of those places only; [`ShadowChange::Unknown`] for an
+    /// object without an exact test, or when the moves since `epoch` are no longer all
+    /// remembered.
     fn shading_since(&self, epoch: u64, p: glam::Vec3) -> ShadowChange {
         if self.recent_moves.front().is_none_or(|m| m.epoch > epoch + 1) && epoch < self.last_move_epoch {
             return ShadowChange::Unknown;
