@@ -90,6 +90,7 @@ fn where_it_went(scene: &edgepoint_scene::Scene, g: &Geometry, costs: &mut [edge
             json!({
                 "light": c.light, "triangle": c.tri, "object": name(c.tri), "cpu_ms": c.cpu_ns as f64 / 1e6,
                 "faces_recomputed": c.stats.faces_recomputed, "faces_kept": c.stats.faces_kept, "traces_recast": c.stats.traces_recast, "eee_recast": c.stats.eee_recast,
+                "parts_cpu_ms": cpu_parts(&c.stats),
             })
         })
         .collect();
@@ -103,6 +104,16 @@ fn where_it_went(scene: &edgepoint_scene::Scene, g: &Geometry, costs: &mut [edge
     let by_object: Vec<serde_json::Value> = by.iter().take(WHERE_LISTED).map(|(n, (r, t, f))| json!({"object": n, "receivers": r, "cpu_ms": *t as f64 / 1e6, "faces_recomputed": f})).collect();
     let total = costs.iter().map(|c| c.cpu_ns).sum::<u64>() as f64 / 1e6;
     (json!(slowest), json!(by_object), total)
+}
+
+/// The CPU time of an update's parts (a move's, summed over threads, or one receiver's).
+fn cpu_parts(s: &edgepoint_server::dmesh::update::UpdateStats) -> serde_json::Value {
+    let ms = |ns: u64| ns as f64 / 1e6;
+    json!({
+        "own_receivers": ms(s.own_receivers_ns), "scan": ms(s.scan_ns),
+        "reintersect": ms(s.reintersect_ns), "recast": ms(s.recast_ns), "eee": ms(s.eee_ns), "eee_dynamic": ms(s.eee_dynamic_ns),
+        "arrangement": ms(s.arrangement_ns), "faces": ms(s.faces_ns),
+    })
 }
 
 pub fn run(a: DmeshArgs) -> Result<()> {
@@ -186,11 +197,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
             "traces_untouched": stats.traces_untouched,
             "traces_recast": stats.traces_recast, "eee_reintersected": stats.eee_reintersected, "eee_untouched": stats.eee_untouched, "eee_recast": stats.eee_recast, "faces_kept": stats.faces_kept, "faces_recomputed": stats.faces_recomputed,
             // CPU time of the update's parts, summed over threads.
-            "cpu_ms": {
-                "own_receivers": stats.own_receivers_ns as f64 / 1e6, "scan": stats.scan_ns as f64 / 1e6,
-                "reintersect": stats.reintersect_ns as f64 / 1e6, "recast": stats.recast_ns as f64 / 1e6, "eee": stats.eee_ns as f64 / 1e6, "eee_dynamic": stats.eee_dynamic_ns as f64 / 1e6,
-                "arrangement": stats.arrangement_ns as f64 / 1e6, "faces": stats.faces_ns as f64 / 1e6,
-            },
+            "cpu_ms": cpu_parts(&stats),
         }));
     }
     let (si, sf) = (incr_ms.iter().sum::<f64>(), full_after_ms.iter().sum::<f64>());
