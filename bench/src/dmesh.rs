@@ -157,6 +157,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let with_segments = mesh.receivers().filter(|m| !m.segments.is_empty()).count();
     let (segments, faces) = (mesh.segment_count(), mesh.face_count());
     let eee_surfaces: usize = mesh.receivers().map(|m| m.eee.len()).sum();
+    let traces: usize = mesh.receivers().map(|m| m.traces.len()).sum();
     let eee_segments: usize = mesh.receivers().map(|m| m.segments.iter().filter(|s| matches!(s.generator, edgepoint_server::dmesh::segments::Generator::Eee { .. })).count()).sum();
     let (mesh_bytes, grid_bytes, geometry_bytes) = (mesh.bytes(), grid.bytes(), g.bytes());
     let threads = rayon::current_num_threads();
@@ -203,7 +204,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
     let (si, sf) = (incr_ms.iter().sum::<f64>(), full_after_ms.iter().sum::<f64>());
     let speedup = if a.moves > 0 { Some(sf / si) } else { None };
     let table = format!(
-        "{}: {} triangles, {} area lights, {threads} threads\nfull computation {full_ms:.1} ms (grid {grid_ms:.1} ms)\nreceivers lit {receivers}, with segments {with_segments}\nsegments {segments} (EEE polyline chords {eee_segments} from {eee_surfaces} EEE surface parts), faces {faces}\nmemory: mesh {:.2} MB (intersection lists {:.2} MB), grid {:.2} MB, geometry {:.2} MB\nmoved {} ({} moves): incremental {:.2} ms, full {:.1} ms per move, speedup {:.1}×, mismatches {bad}\n",
+        "{}: {} triangles, {} area lights, {threads} threads\nfull computation {full_ms:.1} ms (grid {grid_ms:.1} ms)\nreceivers lit {receivers}, with segments {with_segments}\ntraces {traces}, segments {segments} (EEE polyline chords {eee_segments} from {eee_surfaces} EEE surface parts), faces {faces}\nmemory: mesh {:.2} MB (intersection lists {:.2} MB), grid {:.2} MB, geometry {:.2} MB\nmoved {} ({} moves): incremental {:.2} ms, full {:.1} ms per move, speedup {:.1}×, mismatches {bad}\n",
         a.scene,
         g.tris.len(),
         lights.len(),
@@ -226,6 +227,7 @@ pub fn run(a: DmeshArgs) -> Result<()> {
         "grid_ms": grid_ms,
         "receivers": receivers,
         "receivers_with_segments": with_segments,
+        "traces": traces,
         "segments": segments,
         "eee_surfaces": eee_surfaces,
         "eee_segments": eee_segments,
