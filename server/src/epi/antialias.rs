@@ -40,7 +40,7 @@
 use super::code::{BOTTOM, PIXEL, RIGHT, TOP};
 use super::raster::{fine_fraction, Boundaries};
 use super::reach::{Neighbours, NB_PLANES};
-use super::tables::{tables, DIRS, DIR_DOWN, DIR_LEFT, DIR_RIGHT, DIR_UP, PS, SP, SS};
+use super::tables::{tables, DIRS, DIR_DOWN, DIR_LEFT, DIR_RIGHT, DIR_UP, PS, SIDE_A, SIDE_B, SP, SS};
 use super::{EpiPixel, Flags};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -273,9 +273,29 @@ impl super::Epi {
     }
 }
 
+/// The regions of a simple pixel (code `code`) whose sample would lie on its secondary
+/// side (the side its primary region is not: B's other side when `primary_b`), as a bit per
+/// region of [`PIXEL`]: a sample in one of them is usable there, not edge-ambiguous.
+pub fn secondary_regions(code: u16, primary_b: bool) -> u16 {
+    let t = tables();
+    let want = if primary_b { SIDE_A } else { SIDE_B };
+    (0..PIXEL.region_count() as u32).filter(|&r| t.pixel.side(code, r) == want).fold(0, |m, r| m | 1 << r)
+}
+
 /// Anti-aliases the simple pixels of `image`; returns how many took a secondary colour.
-pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3]) -> u32 {
+///
+/// `starved` (bit rows like `filled`) gets the simple pixels whose secondary region found no
+/// colour — no neighbour's primary region it meets was filled, nor a neighbour's secondary
+/// region that found one — though a sample could land there usable
+/// ([`secondary_regions`]): the pixel shows its primary colour alone, and a region thinner
+/// than a pixel along an edge (a box's side seen edge-on, 1 px wide) vanishes wherever no
+/// sample reached it. Sampling picks these pixels and aims into that region
+/// ([`super::Epi::secondary_position`]), as it does for pixels no sample reaches (beyond
+/// the paper, whose priority looks at the primary region's weight only).
+#[allow(clippy::too_many_arguments)] // the EPI's parts it reads, and the two outputs
+pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3], starved: &mut [u64]) -> u32 {
     let (w, h, words) = (flags.width, flags.height, flags.words);
+    starved.fill(0);
     if w == 0 || h == 0 {
         return 0;
     }
@@ -346,8 +366,9 @@ pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled
     let secondary = &*secondary;
     image
         .par_chunks_mut(w)
+        .zip(starved.par_chunks_mut(words))
         .enumerate()
-        .map(|(y, row)| {
+        .map(|(y, (row, starved))| {
             let mut mixed = 0u32;
             for (k, x) in simple_in_row(flags, y).enumerate() {
                 let n = rank[y * words] as usize + k;
@@ -374,6 +395,9 @@ pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled
                     }
                 }
                 row[x] = if second.x.is_nan() {
+                    if secondary_regions(p.code(), p.primary_b()) != 0 {
+                        starved[x / 64] |= 1 << (x % 64);
+                    }
                     own
                 } else {
                     let area_a = exact_area_a(bounds, pixels, x, y, p.code()).unwrap_or_else(|| t.pixel.area_a(p.code()));

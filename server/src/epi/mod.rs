@@ -136,6 +136,9 @@ pub struct ReconstructCounts {
     pub spread: u32,
     /// Simple pixels that took a secondary colour.
     pub antialiased: u32,
+    /// Simple pixels whose secondary region found no colour though a sample could land
+    /// there usable ([`Epi::starved`]).
+    pub starved: u32,
     /// Complex pixels refined by the complex filter.
     pub complex_refined: u32,
 }
@@ -153,6 +156,12 @@ pub struct Epi {
     filled: Vec<u64>,
     /// Bit rows: pixels with no sample in their window (interpolation output).
     holes: Vec<u64>,
+    /// Bit rows: simple pixels whose secondary region found no colour though a sample could
+    /// land there usable (anti-aliasing output, [`antialias::antialias`]).
+    starved: Vec<u64>,
+    /// Bit rows: pixels with a stale point in their 5 × 5 window (interpolation input for
+    /// [`interpolate::OwnSample::FilterAwayFromStale`]).
+    near_stale: Vec<u64>,
     neighbours: reach::Neighbours,
     reach: reach::Reach,
     simple: antialias::SimpleColours,
@@ -174,7 +183,7 @@ impl Epi {
             + raster::Rasterizer::bytes_for(h)
             + std::mem::size_of::<EpiPixel>() * w * h
             + Flags::bytes_for(w, h)
-            + 2 * 8 * h * words
+            + 4 * 8 * h * words
             + reach::Neighbours::bytes_for(w, h)
             + reach::Reach::bytes_for(w, h)
             + antialias::SimpleColours::bytes_for(w, h)
@@ -193,6 +202,8 @@ impl Epi {
             pixels: vec![EpiPixel::default(); w * h],
             filled: vec![0; h * flags.words],
             holes: vec![0; h * flags.words],
+            starved: vec![0; h * flags.words],
+            near_stale: Vec::new(),
             flags,
             neighbours: reach::Neighbours::new(w, h),
             reach: reach::Reach::new(w, h),
@@ -305,6 +316,9 @@ impl Epi {
         });
         let kernel = Kernel::gaussian(options.sigma);
         let interp = times.time(STAGE_INTERPOLATE, || {
+            if options.own_sample == interpolate::OwnSample::FilterAwayFromStale {
+                interpolate::near_stale_rows(points, &mut self.near_stale);
+            }
             let input = interpolate::InterpInput {
                 pixels: &self.pixels,
                 flags: &self.flags,
@@ -313,13 +327,15 @@ impl Epi {
                 kernel: &kernel,
                 options: *options,
                 background,
+                near_stale: &self.near_stale,
             };
             interpolate::interpolate(&input, image, weights, &mut self.filled, &mut self.holes)
         });
         let spread = times.time(STAGE_SPREAD, || self.spread.run(&self.neighbours, &mut self.filled, &mut self.holes, image));
         let antialiased = times.time(STAGE_ANTIALIAS, || {
-            antialias::antialias(&self.pixels, &self.bounds, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image)
+            antialias::antialias(&self.pixels, &self.bounds, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image, &mut self.starved)
         });
+        let starved = self.starved.iter().map(|w| w.count_ones()).sum();
         let mut complex_refined = 0;
         if complex_filter && !self.bounds.centres.is_empty() {
             complex_refined = times.time(STAGE_COMPLEX, || {
@@ -327,7 +343,43 @@ impl Epi {
                 complex::complex_filter(&input, image)
             });
         }
-        ReconstructCounts { interp, spread, antialiased, complex_refined }
+        ReconstructCounts { interp, spread, antialiased, starved, complex_refined }
+    }
+
+    /// Bit rows (`ceil(width / 64)` words per row) of the simple pixels whose secondary
+    /// region the last reconstruction found no colour for, though a sample could land there
+    /// usable: sampling gives them priority and [`Self::secondary_position`] aims into it.
+    pub fn starved(&self) -> &[u64] {
+        &self.starved
+    }
+
+    /// For a pixel of [`Self::starved`]: a position in its unit square inside one of the
+    /// sample regions on its secondary side (so a sample there is usable and makes that side
+    /// the pixel's primary region), the region and the place in it chosen by the unit
+    /// numbers `u` and `v` (a pick's jitter); `None` for any other pixel.
+    pub fn secondary_position(&self, x: usize, y: usize, u: f32, v: f32) -> Option<[f32; 2]> {
+        if x >= self.width || y >= self.height || (self.starved[y * self.flags.words + x / 64] >> (x % 64)) & 1 == 0 {
+            return None;
+        }
+        let p = self.pixels[y * self.width + x];
+        let mut regions = antialias::secondary_regions(p.code(), p.primary_b());
+        let count = regions.count_ones();
+        if count == 0 {
+            return None;
+        }
+        // The k-th of the regions (u picks k; what is left of u after k and v place the
+        // position in it, kept 5 % of the region's side from its sides).
+        let scaled = u.clamp(0.0, 1.0) * count as f32;
+        let k = (scaled as u32).min(count - 1);
+        for _ in 0..k {
+            regions &= regions - 1;
+        }
+        let r = regions.trailing_zeros();
+        let n = PIXEL.regions;
+        let (rx, ry) = ((r % n) as f32, (r / n) as f32);
+        let (fu, fv) = ((scaled - k as f32).clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+        let at = |i: f32, f: f32| ((i + 0.05 + 0.9 * f) / n as f32).min(1.0 - f32::EPSILON);
+        Some([at(rx, fu), at(ry, fv)])
     }
 
     /// Bit rows (`ceil(width / 64)` words per row) of the pixels the last reconstruction left

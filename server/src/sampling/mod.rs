@@ -82,6 +82,12 @@ pub fn priority(weight: f32, age: f32, max_age_frames: f32) -> f32 {
     }
 }
 
+/// Priority of a pixel with a starved region (the edge-and-point image's
+/// `Epi::starved`: a simple pixel whose secondary region no sample reached, so it shows its
+/// primary colour alone): as a stale point's — part of the pixel shows the wrong colour —
+/// below a pixel no sample reaches at all.
+pub const PRIORITY_STARVED_REGION: f32 = PRIORITY_STALE_POINT;
+
 /// The most a point's priority reaches with its gain ([`priority_gained`]): below a stale
 /// point's, so that what a move changed and what no sample reaches still go first.
 pub const PRIORITY_GAINED_MAX: f32 = 0.5;
@@ -248,6 +254,21 @@ pub fn aim_at_points(
     });
 }
 
+/// Picks of pixels with a starved region (see [`PRIORITY_STARVED_REGION`]) moved into it:
+/// `position(x, y, u, v)` (the session asks `Epi::secondary_position`, with the pick's
+/// jitter in its pixel as `u`, `v`) gives the place in the pixel's unit square, `None` for a
+/// pixel without one. Such a pick shades a new point there, not a cached one: after
+/// [`aim_at_points`], which may have aimed it at the pixel's point.
+pub fn aim_into_starved(picks: &mut [PixelRequest], position: impl Fn(u32, u32, f32, f32) -> Option<[f32; 2]> + Sync) {
+    picks.par_chunks_mut(2048).for_each(|chunk| {
+        for p in chunk {
+            if let Some([u, v]) = position(p.x, p.y, p.sx - p.x as f32, p.sy - p.y as f32) {
+                (p.sx, p.sy, p.point) = (inside_pixel(p.x, u), inside_pixel(p.y, v), NO_POINT);
+            }
+        }
+    });
+}
+
 /// Flag bit of [`PixelRequest::point`] ([`aim_at_points`]): the pick is a sample of the
 /// point anywhere in its pixel, not at its position. (Point slots are far below 2³¹: the
 /// cache holds a few points per pixel.)
@@ -339,16 +360,19 @@ impl Sampler {
     ///
     /// Panics if `weights` or `ages` do not have one entry per pixel (a caller bug).
     pub fn select(&mut self, weights: &[f32], ages: &[f32], cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
-        self.select_gained(weights, ages, None, cfg, budget, out);
+        self.select_gained(weights, ages, None, None, cfg, budget, out);
     }
 
     /// [`Self::select`] with the priority of each pixel's (fresh or aged, not stale) point
     /// multiplied by `gains` (one per pixel; `render_cache`'s `noise_gains`: noisier points
     /// are re-shaded more often while the view is still), and capped at
-    /// [`PRIORITY_GAINED_MAX`], below stale points and unreached pixels.
+    /// [`PRIORITY_GAINED_MAX`], below stale points and unreached pixels. The pixels of
+    /// `starved` (bit rows, `ceil(width / 64)` words a row) get at least
+    /// [`PRIORITY_STARVED_REGION`].
     ///
-    /// Panics if `weights`, `ages` or `gains` do not have one entry per pixel (a caller bug).
-    pub fn select_gained(&mut self, weights: &[f32], ages: &[f32], gains: Option<&[f32]>, cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
+    /// Panics if `weights`, `ages`, `gains` or `starved` do not fit the image (a caller bug).
+    #[allow(clippy::too_many_arguments)] // the per-pixel inputs, the settings and the output
+    pub fn select_gained(&mut self, weights: &[f32], ages: &[f32], gains: Option<&[f32]>, starved: Option<&[u64]>, cfg: &SamplingConfig, budget: usize, out: &mut Vec<PixelRequest>) {
         out.clear();
         let (w, h) = (self.width as usize, self.height as usize);
         let n = w * h;
@@ -375,6 +399,10 @@ impl Sampler {
         if let Some(g) = gains {
             assert_eq!(g.len(), n, "sampler: {} gains for a {w}x{h} image", g.len());
         }
+        let words = w.div_ceil(64);
+        if let Some(s) = starved {
+            assert_eq!(s.len(), h * words, "sampler: {} starved words for a {w}x{h} image", s.len());
+        }
         // Priorities in one straight loop per row (it vectorises), then the row's sum (see
         // `row_sum`) and its maximum.
         let max = self
@@ -393,6 +421,16 @@ impl Sampler {
                     Some(g) => {
                         for (((p, &wt), &age), &gain) in row.iter_mut().zip(wr).zip(ar).zip(&g[y * w..(y + 1) * w]) {
                             *p = priority_gained(wt, age, max_age, gain);
+                        }
+                    }
+                }
+                if let Some(s) = starved {
+                    for (j, &word) in s[y * words..(y + 1) * words].iter().enumerate() {
+                        let mut bits = word;
+                        while bits != 0 {
+                            let x = 64 * j + bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            row[x] = row[x].max(PRIORITY_STARVED_REGION);
                         }
                     }
                 }

@@ -368,6 +368,53 @@ fn gains_scale_only_points_priorities_and_stay_below_stale_ones() {
     let cfg = SamplingConfig::default();
     let (mut a, mut b) = (Vec::new(), Vec::new());
     Sampler::new(w, h, 9).select(&weights, &ages, &cfg, n / 16, &mut a);
-    Sampler::new(w, h, 9).select_gained(&weights, &ages, Some(&vec![1.0; n]), &cfg, n / 16, &mut b);
+    Sampler::new(w, h, 9).select_gained(&weights, &ages, Some(&vec![1.0; n]), None, &cfg, n / 16, &mut b);
     assert_eq!(a, b);
+}
+
+#[test]
+fn starved_pixels_are_picked_as_stale_points_are_and_their_picks_moved_into_the_region() {
+    // Every pixel holds a fresh point (priority 0.02) but a scattered few with a starved
+    // region: at PRIORITY_STARVED_REGION = 30 times a fresh point's, a budget of 300 scales
+    // the priorities by about 2.3, so each of them is picked for sure (a scaled priority of
+    // 1.4), where without the plane they get a fresh point's share (about 0.05 each).
+    let (w, h) = (130u32, 40u32);
+    let n = (w * h) as usize;
+    let words = (w as usize).div_ceil(64);
+    let mut rng = Rng::new(12);
+    let mut starved = vec![0u64; h as usize * words];
+    let mut marked = Vec::new();
+    for _ in 0..60 {
+        let (x, y) = (rng.below(w as usize), rng.below(h as usize));
+        if starved[y * words + x / 64] & (1 << (x % 64)) == 0 {
+            starved[y * words + x / 64] |= 1 << (x % 64);
+            marked.push((x as u32, y as u32));
+        }
+    }
+    let (weights, ages) = (vec![5.0f32; n], vec![0.0f32; n]);
+    let cfg = SamplingConfig::default();
+    let budget = 300;
+    let count = |picks: &[PixelRequest]| picks.iter().filter(|p| marked.contains(&(p.x, p.y))).count();
+    let mut picks = Vec::new();
+    Sampler::new(w, h, 3).select_gained(&weights, &ages, None, Some(&starved), &cfg, budget, &mut picks);
+    check_picks(&picks, w, h, budget);
+    let with = count(&picks);
+    assert!(with * 10 >= marked.len() * 9, "{with} of {} starved pixels picked", marked.len());
+    Sampler::new(w, h, 3).select_gained(&weights, &ages, None, None, &cfg, budget, &mut picks);
+    let without = count(&picks);
+    assert!(without * 5 < marked.len(), "{without} of {} picked without the plane", marked.len());
+    // The picks of the starved pixels move to the position the region gives; the others keep
+    // theirs.
+    Sampler::new(w, h, 3).select_gained(&weights, &ages, None, Some(&starved), &cfg, budget, &mut picks);
+    let before = picks.clone();
+    aim_into_starved(&mut picks, |x, y, u, _| marked.contains(&(x, y)).then_some([0.25 * u + 0.7, 0.125]));
+    for (p, b) in picks.iter().zip(&before) {
+        if marked.contains(&(p.x, p.y)) {
+            let u = b.sx - b.x as f32;
+            assert_eq!((p.sx, p.sy, p.point), (p.x as f32 + (0.25 * u + 0.7), p.y as f32 + 0.125, crate::render_cache::NO_POINT));
+        } else {
+            assert_eq!(p, b);
+        }
+    }
+    check_picks(&picks, w, h, budget);
 }

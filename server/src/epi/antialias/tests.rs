@@ -292,3 +292,79 @@ fn positions_of_a_simple_pixel_are_on_one_side_of_its_edge_exactly_when_the_line
     }
     assert!(agreed > 10_000, "{agreed} decided pairs");
 }
+
+/// The box-filtered mean of `colour_at` over pixel (x, y), on a 32 × 32 grid.
+fn pixel_mean(x: usize, y: usize, colour_at: &impl Fn([f64; 2]) -> Vec3) -> Vec3 {
+    let n = 32;
+    let mut sum = Vec3::ZERO;
+    for j in 0..n {
+        for i in 0..n {
+            sum += colour_at([x as f64 + (i as f64 + 0.5) / n as f64, y as f64 + (j as f64 + 0.5) / n as f64]);
+        }
+    }
+    sum / (n * n) as f32
+}
+
+#[test]
+fn a_strip_thinner_than_a_pixel_that_no_sample_reached_is_starved_until_samples_aimed_into_it_bring_it_back() {
+    // A box's side seen edge-on: a bright strip 0.45–0.85 px wide between two parallel
+    // edges, across the image at any angle, with a point in every pixel except where the
+    // point would fall in the strip. The pixels the strip's edges cross show their primary
+    // colour alone (nothing gives their secondary region, the strip, a colour): they are
+    // starved, and every position `secondary_position` gives lies in the strip. With a
+    // point there (a pick aimed into it), the strip comes back: the starved pixels become
+    // few and the image nears the box-filtered one.
+    let (w, h) = (40, 32);
+    let (strip, outside) = (Vec3::new(9.0, 7.0, 3.0), Vec3::splat(0.05));
+    let mut rng = Rng(23);
+    for trial in 0..12 {
+        let angle = 0.2 + rng.f64() * (std::f64::consts::PI - 0.4);
+        let width = 0.45 + 0.4 * rng.f64();
+        let centre = [12.0 + rng.f64() * (w as f64 - 24.0), 10.0 + rng.f64() * (h as f64 - 20.0)];
+        let (dx, dy) = (angle.cos() * 100.0, angle.sin() * 100.0);
+        let (nx, ny) = (-angle.sin() * 0.5 * width, angle.cos() * 0.5 * width);
+        let line = |s: f64| ([centre[0] - dx + s * nx, centre[1] - dy + s * ny], [centre[0] + dx + s * nx, centre[1] + dy + s * ny]);
+        let (l0, l1) = (line(-1.0), line(1.0));
+        let in_strip = |r: [f64; 2]| (orient(l0.0, l0.1, r) > 0.0) != (orient(l1.0, l1.1, r) > 0.0);
+        let colour_at = |r: [f64; 2]| if in_strip(r) { strip } else { outside };
+        let mut points = points_coloured(w, h, &mut rng, colour_at, |_, _| false);
+        for i in 0..w * h {
+            let [u, v] = points.subpixel[i];
+            if in_strip([(i % w) as f64 + u as f64, (i / w) as f64 + v as f64]) {
+                (points.point[i], points.depth[i], points.age[i], points.color[i]) = (NO_POINT, f32::INFINITY, f32::INFINITY, Vec3::ZERO);
+            }
+        }
+        let segments = [l0, l1];
+        let error = |image: &[Vec3], epi: &Epi| -> f32 {
+            (0..w * h).filter(|&i| epi.pixels()[i].is_simple()).map(|i| (image[i] - pixel_mean(i % w, i / w, &colour_at)).abs().max_element()).sum()
+        };
+        let (epi, image, _) = reconstruct(w, h, &segments, &points, true);
+        let starved: Vec<(usize, usize)> = (0..w * h).filter(|&i| (epi.starved()[(i / w) * w.div_ceil(64) + (i % w) / 64] >> ((i % w) % 64)) & 1 == 1).map(|i| (i % w, i / w)).collect();
+        assert!(starved.len() >= 3, "trial {trial}: {} starved pixels", starved.len());
+        let before = error(&image, &epi);
+        for &(x, y) in &starved {
+            assert!(epi.pixels()[y * w + x].is_simple(), "trial {trial}: ({x},{y}) starved but not simple");
+            for _ in 0..16 {
+                let at = epi.secondary_position(x, y, rng.unit(), rng.unit()).unwrap_or_else(|| panic!("trial {trial}: ({x},{y}) starved without a position"));
+                assert!(in_strip([x as f64 + at[0] as f64, y as f64 + at[1] as f64]), "trial {trial}: ({x},{y}) aimed at {at:?}, outside the strip");
+            }
+        }
+        // Pixels not starved have no position.
+        for i in (0..w * h).step_by(7) {
+            if !starved.contains(&(i % w, i / w)) {
+                assert_eq!(epi.secondary_position(i % w, i / w, 0.5, 0.5), None);
+            }
+        }
+        // A sample at an aimed position in every starved pixel.
+        for &(x, y) in &starved {
+            let i = y * w + x;
+            let at = epi.secondary_position(x, y, rng.unit(), rng.unit()).expect("starved");
+            (points.point[i], points.depth[i], points.age[i], points.subpixel[i], points.color[i]) = (i as u32, 1.0, 1.0, at, strip);
+        }
+        let (epi_after, image_after, _) = reconstruct(w, h, &segments, &points, true);
+        let left = epi_after.starved().iter().map(|b| b.count_ones()).sum::<u32>() as usize;
+        let after = error(&image_after, &epi_after);
+        assert!(left * 4 <= starved.len(), "trial {trial}: {left} of {} still starved", starved.len());
+        assert!(after < 0.5 * before, "trial {trial}: error over the simple pixels {before} → {after}");
+    }
+}

@@ -60,6 +60,49 @@ pub enum OwnSample {
     Show,
     /// The kernel-weighted mean with its reachable neighbours.
     Filter,
+    /// [`Self::Filter`], but [`Self::Show`] where a stale point (age
+    /// [`crate::render_cache::STALE_AGE`]: shaded before a move that may have changed it) lies
+    /// in the pixel's 5 × 5 window ([`InterpInput::near_stale`]): a fresh sample amid stale
+    /// ones (a moving box's new shadow on points shaded lit) shows as shaded, not diluted by
+    /// them, and a stale one stays in its pixel, as with [`Self::Show`].
+    FilterAwayFromStale,
+}
+
+/// Bit rows (`ceil(width / 64)` words a row) of the pixels whose 5 × 5 window holds a stale
+/// point (age [`crate::render_cache::STALE_AGE`] or more, finite), into `out`: the stale
+/// points' bits dilated by two pixels each way.
+pub fn near_stale_rows(points: &PointImage, out: &mut Vec<u64>) {
+    let (w, h) = (points.width as usize, points.height as usize);
+    let words = w.div_ceil(64);
+    out.clear();
+    out.resize(h * words, 0);
+    if w == 0 {
+        return;
+    }
+    // The stale points' bits, dilated along their row.
+    let mut rows = vec![0u64; h * words];
+    rows.par_chunks_mut(words).zip(points.age.par_chunks(w)).for_each(|(row, ages)| {
+        for (x, &a) in ages.iter().enumerate() {
+            if (crate::render_cache::STALE_AGE..f32::INFINITY).contains(&a) {
+                row[x / 64] |= 1 << (x % 64);
+            }
+        }
+        let s: Vec<u64> = row.to_vec();
+        for j in 0..words {
+            let (prev, next) = (if j > 0 { s[j - 1] } else { 0 }, s.get(j + 1).copied().unwrap_or(0));
+            let up = s[j] << 1 | s[j] << 2 | prev >> 63 | prev >> 62;
+            let down = s[j] >> 1 | s[j] >> 2 | next << 63 | next << 62;
+            row[j] = (s[j] | up | down) & valid_bits(w, j);
+        }
+    });
+    // Then across rows.
+    out.par_chunks_mut(words).enumerate().for_each(|(y, o)| {
+        for r in y.saturating_sub(2)..(y + 3).min(h) {
+            for (a, b) in o.iter_mut().zip(&rows[r * words..(r + 1) * words]) {
+                *a |= b;
+            }
+        }
+    });
 }
 
 /// Interpolation options.
@@ -121,6 +164,9 @@ pub struct InterpInput<'a> {
     pub kernel: &'a Kernel,
     pub options: InterpOptions,
     pub background: Vec3,
+    /// For [`OwnSample::FilterAwayFromStale`]: [`near_stale_rows`] of `points` (any other
+    /// mode ignores it; empty reads as no stale point).
+    pub near_stale: &'a [u64],
 }
 
 /// Rows per parallel task.
@@ -303,9 +349,11 @@ impl WordPlan {
         let has = f.row(y, Flags::HAS)[j];
         let usable = f.row(y, Flags::USABLE)[j];
         let complex = f.row(y, Flags::COMPLEX)[j];
+        let shown = usable | (complex & has);
         let own = match input.options.own_sample {
-            OwnSample::Show => usable | (complex & has),
+            OwnSample::Show => shown,
             OwnSample::Filter => 0,
+            OwnSample::FilterAwayFromStale => shown & input.near_stale.get(y * f.words + j).copied().unwrap_or(0),
         } & valid;
         let need = valid & !own;
         WordPlan { valid, has, own, plain: need & !complex, complex: need & complex }

@@ -11,9 +11,12 @@ fn reconstruction_interpolates_as_the_per_pixel_loop() {
         (37, 21, 0.3, OwnSample::Show, true),
         (66, 13, 0.05, OwnSample::Filter, true),
         (20, 20, 0.6, OwnSample::Filter, false),
+        (70, 19, 0.4, OwnSample::FilterAwayFromStale, false),
+        (33, 9, 0.1, OwnSample::FilterAwayFromStale, true),
         (130, 5, 0.15, OwnSample::Show, false),
     ] {
-        let points = random_points(w, h, density, &mut rng);
+        let mut points = random_points(w, h, density, &mut rng);
+        mark_some_stale(&mut points, &mut rng);
         let mut epi = random_epi(&points, 5, 8, false, &mut rng);
         let background = Vec3::new(0.1, 0.2, 0.3);
         let options = InterpOptions { sigma: 0.9, own_sample, fallback };
@@ -64,7 +67,22 @@ fn per_pixel(epi: &crate::epi::Epi, points: &PointImage, kernel: &Kernel, option
             let i = y * w + x;
             let p = epi.pixels()[i];
             let has = flags.get(x, y, Flags::HAS);
-            let own = options.own_sample == OwnSample::Show && (p.usable() || (p.is_complex() && has));
+            // A stale point in the window, found directly (the oracle of the bit rows).
+            let near_stale = (-2i64..=2).any(|dy| {
+                (-2i64..=2).any(|dx| {
+                    let (px, py) = (x as i64 + dx, y as i64 + dy);
+                    px >= 0 && py >= 0 && px < w as i64 && py < h as i64 && {
+                        let a = points.age[py as usize * w + px as usize];
+                        a >= crate::render_cache::STALE_AGE && a.is_finite()
+                    }
+                })
+            });
+            let shows = match options.own_sample {
+                OwnSample::Show => true,
+                OwnSample::Filter => false,
+                OwnSample::FilterAwayFromStale => near_stale,
+            };
+            let own = shows && (p.usable() || (p.is_complex() && has));
             let m = epi.reachability().mask24(x, y);
             let (mut s, mut f) = ([0f32; 4], [0f32; 4]);
             for k in 0..25 {
@@ -129,6 +147,7 @@ fn every_path_and_instruction_set_equals_a_per_pixel_loop_bit_for_bit() {
     for (w, h) in [(37, 21), (130, 9), (64, 12), (200, 7)] {
         for density in [1.0, 0.6, 0.2, 0.05] {
             let mut points = random_points(w, h, density, &mut rng);
+            mark_some_stale(&mut points, &mut rng);
             let mut epi = random_epi(&points, 4, 6, false, &mut rng);
             // A few failed shades: shown by their own pixel, black to their neighbours.
             for c in points.color.iter_mut() {
@@ -141,12 +160,15 @@ fn every_path_and_instruction_set_equals_a_per_pixel_loop_bit_for_bit() {
             let mut times = crate::stage_times::StageTimes::new();
             // Computes the reachability the interpolation reads.
             epi.reconstruct(&points, background, &InterpOptions::default(), false, &mut image, &mut weights, &mut times);
-            for own_sample in [OwnSample::Show, OwnSample::Filter] {
+            let mut near_stale = Vec::new();
+            near_stale_rows(&points, &mut near_stale);
+            for own_sample in [OwnSample::Show, OwnSample::Filter, OwnSample::FilterAwayFromStale] {
                 for fallback in [false, true] {
                     let options = InterpOptions { sigma: 0.9, own_sample, fallback };
                     let kernel = Kernel::gaussian(options.sigma);
                     let want = per_pixel(&epi, &points, &kernel, options, background);
                     let input = InterpInput {
+                        near_stale: &near_stale,
                         pixels: epi.pixels(),
                         flags: epi.flags(),
                         reach: epi.reachability(),
@@ -177,5 +199,19 @@ fn every_path_and_instruction_set_equals_a_per_pixel_loop_bit_for_bit() {
             }
         }
     }
-    assert_eq!(runs, 4 * 4 * 4 * isas.len() * 3);
+    assert_eq!(runs, 4 * 4 * 6 * isas.len() * 3);
+}
+
+/// Marks about 3 % of the points stale (age `STALE_AGE`), in clusters of a few pixels.
+fn mark_some_stale(points: &mut PointImage, rng: &mut Rng) {
+    let (w, h) = (points.width as usize, points.height as usize);
+    for _ in 0..(w * h / 100).max(1) {
+        let (x, y) = (rng.below(w), rng.below(h));
+        for (dx, dy) in [(0, 0), (1, 0), (0, 1)] {
+            let i = (y + dy).min(h - 1) * w + (x + dx).min(w - 1);
+            if points.point[i] != crate::render_cache::NO_POINT {
+                points.age[i] = crate::render_cache::STALE_AGE;
+            }
+        }
+    }
 }

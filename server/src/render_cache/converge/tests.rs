@@ -354,7 +354,7 @@ fn still_frames_by_noise(gained: bool, frames: u32, sigma_left: f32, sigma_right
         c.reproject_and_interpolate(&cam, &mut StageTimes::new());
         let with_gains = gained && c.update_noise_gains();
         let gains = with_gains.then(|| c.noise_gains());
-        sampler.select_gained(c.filter_weights(), &c.point_image().age, gains, &cfg, n_px / 4, &mut picks);
+        sampler.select_gained(c.filter_weights(), &c.point_image().age, gains, None, &cfg, n_px / 4, &mut picks);
         aim_at_points(&mut picks, c.point_image(), |_, _| true, |_, _, _, _| false);
         for p in &picks {
             c.insert_aimed(&shade(&cam, [p.x, p.y], (p.sx, p.sy), noise(&mut rng, p.x), 1), false, p.point);
