@@ -119,16 +119,18 @@ const COHERENT_AFTER_FRAMES: u32 = REST_AFTER_FRAMES + 10;
 
 /// Still frames after which a pixel with its own usable sample shows it as shaded (the
 /// Render Cache rule, [`OwnSample::Show`]); before, in motion and in the first frames at
-/// rest, it is filtered with its reachable neighbours like any other pixel
-/// ([`OwnSample::Filter`], the kernel's σ of 0.8 px, edges respected). In motion most pixels
-/// hold a point shaded once, whose Monte Carlo noise (16 shadow rays in a penumbra) the
-/// shown sample puts on screen pixel by pixel: the frames were grainy where the reference is
-/// smooth. Filtering averages about five points' worth and keeps edges: on `cornell`'s orbit
-/// 45.9 → 47.1–47.4 dB, SSIM 0.983 → 0.989, `tallbox` moving 42.4–43.1 → 43.4–43.6 dB, at
-/// rest from the start 46.4 → 48.0 dB at frame 10. At rest the points converge (a re-picked
-/// point averages its samples) and the shown sample catches up: equal near frame 80 of a
-/// still `cornell` (48.31 dB both), 0.05 dB ahead at 200 — so from here on it is shown
-/// again, where the switch changes nothing visible.
+/// rest, it is filtered with its reachable neighbours like any other pixel, except near a
+/// stale point ([`OwnSample::FilterAwayFromStale`]; the kernel's σ of 0.8 px, edges
+/// respected). In motion most pixels hold a point shaded once, whose Monte Carlo noise (16
+/// shadow rays in a penumbra) the shown sample put on screen pixel by pixel: the frames were
+/// grainy where the reference is smooth. Filtering averages about five points' worth and
+/// keeps edges (`edgepoint-bench motion`, 2026-12-05): `cornell`'s orbit 45.8 → 47.4 dB, SSIM
+/// 0.983 → 0.989; `cornell-point`'s 50.2 → 51.9 dB; `rooms`' 37.9 → 39.2 dB. Near stale
+/// points it shows them as before: filtered there, a moving box's new shadow on points shaded
+/// lit came out diluted (more outlier pixels on `cornell` with `tallbox` moving). At rest the
+/// points converge (a re-picked point averages its samples) and the shown sample catches up:
+/// equal near frame 80 of a still `cornell` (48.31 dB both), 0.05 dB ahead at 200 — so from
+/// here on it is shown again, where the switch changes nothing visible.
 pub const OWN_SAMPLE_SHOWN_AFTER: u32 = 80;
 
 /// What a pixel with its own usable sample shows after `still_frames` still frames
