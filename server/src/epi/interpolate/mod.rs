@@ -60,11 +60,13 @@ pub enum OwnSample {
     Show,
     /// The kernel-weighted mean with its reachable neighbours.
     Filter,
-    /// [`Self::Filter`], but [`Self::Show`] where a stale point (age
-    /// [`crate::render_cache::STALE_AGE`]: shaded before a move that may have changed it) lies
-    /// in the pixel's 5 × 5 window ([`InterpInput::near_stale`]): a fresh sample amid stale
-    /// ones (a moving box's new shadow on points shaded lit) shows as shaded, not diluted by
-    /// them, and a stale one stays in its pixel, as with [`Self::Show`].
+    /// [`Self::Filter`] for pixels that are not complex, but [`Self::Show`] where a stale
+    /// point (age [`crate::render_cache::STALE_AGE`]: shaded before a move that may have
+    /// changed it) lies in the pixel's 5 × 5 window ([`InterpInput::near_stale`]): a fresh
+    /// sample amid stale ones (a moving box's new shadow on points shaded lit) shows as
+    /// shaded, not diluted by them, and a stale one stays in its pixel. A complex pixel with
+    /// a sample shows it as [`Self::Show`] does: its window mean ignores reachability, so
+    /// filtered it would mix the surfaces its edges separate.
     FilterAwayFromStale,
 }
 
@@ -353,7 +355,7 @@ impl WordPlan {
         let own = match input.options.own_sample {
             OwnSample::Show => shown,
             OwnSample::Filter => 0,
-            OwnSample::FilterAwayFromStale => shown & input.near_stale.get(y * f.words + j).copied().unwrap_or(0),
+            OwnSample::FilterAwayFromStale => (complex & has) | (usable & input.near_stale.get(y * f.words + j).copied().unwrap_or(0)),
         } & valid;
         let need = valid & !own;
         WordPlan { valid, has, own, plain: need & !complex, complex: need & complex }

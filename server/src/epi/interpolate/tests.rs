@@ -80,7 +80,7 @@ fn per_pixel(epi: &crate::epi::Epi, points: &PointImage, kernel: &Kernel, option
             let shows = match options.own_sample {
                 OwnSample::Show => true,
                 OwnSample::Filter => false,
-                OwnSample::FilterAwayFromStale => near_stale,
+                OwnSample::FilterAwayFromStale => near_stale || p.is_complex(),
             };
             let own = shows && (p.usable() || (p.is_complex() && has));
             let m = epi.reachability().mask24(x, y);
