@@ -295,7 +295,6 @@ pub fn secondary_regions(code: u16, primary_b: bool) -> u16 {
 #[allow(clippy::too_many_arguments)] // the EPI's parts it reads, and the two outputs
 pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled: &[u64], nb: &Neighbours, simple: &mut SimpleColours, image: &mut [Vec3], starved: &mut [u64]) -> u32 {
     let (w, h, words) = (flags.width, flags.height, flags.words);
-    starved.fill(0);
     if w == 0 || h == 0 {
         return 0;
     }
@@ -369,6 +368,7 @@ pub fn antialias(pixels: &[EpiPixel], bounds: &Boundaries, flags: &Flags, filled
         .zip(starved.par_chunks_mut(words))
         .enumerate()
         .map(|(y, (row, starved))| {
+            starved.fill(0);
             let mut mixed = 0u32;
             for (k, x) in simple_in_row(flags, y).enumerate() {
                 let n = rank[y * words] as usize + k;

@@ -136,9 +136,6 @@ pub struct ReconstructCounts {
     pub spread: u32,
     /// Simple pixels that took a secondary colour.
     pub antialiased: u32,
-    /// Simple pixels whose secondary region found no colour though a sample could land
-    /// there usable ([`Epi::starved`]).
-    pub starved: u32,
     /// Complex pixels refined by the complex filter.
     pub complex_refined: u32,
 }
@@ -160,8 +157,9 @@ pub struct Epi {
     /// land there usable (anti-aliasing output, [`antialias::antialias`]).
     starved: Vec<u64>,
     /// Bit rows: pixels with a stale point in their 5 × 5 window (interpolation input for
-    /// [`interpolate::OwnSample::FilterAwayFromStale`]).
+    /// [`interpolate::OwnSample::FilterAwayFromStale`]), and the scratch they are made in.
     near_stale: Vec<u64>,
+    near_stale_rows: Vec<u64>,
     neighbours: reach::Neighbours,
     reach: reach::Reach,
     simple: antialias::SimpleColours,
@@ -183,7 +181,7 @@ impl Epi {
             + raster::Rasterizer::bytes_for(h)
             + std::mem::size_of::<EpiPixel>() * w * h
             + Flags::bytes_for(w, h)
-            + 4 * 8 * h * words
+            + 5 * 8 * h * words
             + reach::Neighbours::bytes_for(w, h)
             + reach::Reach::bytes_for(w, h)
             + antialias::SimpleColours::bytes_for(w, h)
@@ -204,6 +202,7 @@ impl Epi {
             holes: vec![0; h * flags.words],
             starved: vec![0; h * flags.words],
             near_stale: Vec::new(),
+            near_stale_rows: Vec::new(),
             flags,
             neighbours: reach::Neighbours::new(w, h),
             reach: reach::Reach::new(w, h),
@@ -317,7 +316,7 @@ impl Epi {
         let kernel = Kernel::gaussian(options.sigma);
         let interp = times.time(STAGE_INTERPOLATE, || {
             if options.own_sample == interpolate::OwnSample::FilterAwayFromStale {
-                interpolate::near_stale_rows(points, &mut self.near_stale);
+                interpolate::near_stale_rows(points, &mut self.near_stale_rows, &mut self.near_stale);
             }
             let input = interpolate::InterpInput {
                 pixels: &self.pixels,
@@ -335,7 +334,6 @@ impl Epi {
         let antialiased = times.time(STAGE_ANTIALIAS, || {
             antialias::antialias(&self.pixels, &self.bounds, &self.flags, &self.filled, &self.neighbours, &mut self.simple, image, &mut self.starved)
         });
-        let starved = self.starved.iter().map(|w| w.count_ones()).sum();
         let mut complex_refined = 0;
         if complex_filter && !self.bounds.centres.is_empty() {
             complex_refined = times.time(STAGE_COMPLEX, || {
@@ -343,7 +341,7 @@ impl Epi {
                 complex::complex_filter(&input, image)
             });
         }
-        ReconstructCounts { interp, spread, antialiased, starved, complex_refined }
+        ReconstructCounts { interp, spread, antialiased, complex_refined }
     }
 
     /// Bit rows (`ceil(width / 64)` words per row) of the simple pixels whose secondary

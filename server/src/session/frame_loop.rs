@@ -117,28 +117,24 @@ pub const REST_AFTER_FRAMES: u32 = 8;
 /// `gi` showed 17.7–18.7 dB at 0.25 s instead of 21.7–24, its first answers a band of rows).
 const COHERENT_AFTER_FRAMES: u32 = REST_AFTER_FRAMES + 10;
 
-/// Still frames after which a pixel with its own usable sample shows it as shaded (the
-/// Render Cache rule, [`OwnSample::Show`]): at rest, as the session's pacing counts it.
-/// In motion it is filtered with its reachable neighbours like any other pixel, except near
-/// a stale point ([`OwnSample::FilterAwayFromStale`]; the kernel's σ of 0.8 px, edges
-/// respected). In motion most pixels hold a point shaded once, whose Monte Carlo noise (16
-/// shadow rays in a penumbra) the shown sample put on screen pixel by pixel: the frames were
-/// grainy where the reference is smooth. Filtering averages about five points' worth and
-/// keeps edges (`edgepoint-bench motion`, 2026-12-05): `cornell`'s orbit 45.8 → 47.4 dB, SSIM
-/// 0.983 → 0.989; `cornell-point`'s 50.2 → 51.9 dB; `rooms`' 37.9 → 39.2 dB. Near stale
-/// points it shows them as before: filtered there, a moving box's new shadow on points shaded
-/// lit came out diluted (more outlier pixels on `cornell` with `tallbox` moving). At rest the
-/// points converge (a re-picked point averages its samples) and filtering them only blurs:
-/// kept for the first 80 still frames, a still 64² `cornell-point` stalled at 31.5 dB where
-/// showing reaches 41.0 by frame 60 (the point light's hot spot on the ceiling spread). In
-/// motion filtering gains at every size measured (`cornell-point`'s orbit at 64², 128², 256²:
-/// 38.3 → 39.8, 45.2 → 46.8, 48.9 → 49.6 dB).
-pub const OWN_SAMPLE_SHOWN_AFTER: u32 = REST_AFTER_FRAMES;
-
-/// What a pixel with its own usable sample shows after `still_frames` still frames
-/// ([`OWN_SAMPLE_SHOWN_AFTER`]).
+/// What a pixel with its own usable sample shows after `still_frames` still frames: at rest
+/// (from [`REST_AFTER_FRAMES`], as the session's pacing counts it) the sample as shaded (the
+/// Render Cache rule, [`OwnSample::Show`]); in motion the mean with its reachable neighbours
+/// like any other pixel, except near a stale point or in a complex pixel
+/// ([`OwnSample::FilterAwayFromStale`]; the kernel's σ of 0.8 px, edges respected). In
+/// motion most pixels hold a point shaded once, whose Monte Carlo noise (16 shadow rays in a
+/// penumbra) the shown sample put on screen pixel by pixel: the frames were grainy where the
+/// reference is smooth. Filtering averages about five points' worth and keeps edges
+/// (`edgepoint-bench motion`, 2026-12-05): `cornell`'s orbit 45.8 → 47.4 dB, SSIM 0.983 →
+/// 0.989; `cornell-point`'s 50.2 → 51.9 dB; `rooms`' 37.9 → 39.2 dB; `cornell-point`'s orbit
+/// at 64², 128², 256²: 38.3 → 39.8, 45.2 → 46.8, 48.9 → 49.6 dB. Near stale points it shows
+/// them as before: filtered there, a moving box's new shadow on points shaded lit came out
+/// diluted. At rest the points converge (a re-picked point averages its samples) and
+/// filtering them only blurs: kept for the first 80 still frames, a still 64²
+/// `cornell-point` stalled at 31.5 dB where showing reaches 41.0 by frame 60 (the point
+/// light's hot spot on the ceiling spread).
 pub fn own_sample_after(still_frames: u32) -> OwnSample {
-    if still_frames < OWN_SAMPLE_SHOWN_AFTER {
+    if still_frames < REST_AFTER_FRAMES {
         OwnSample::FilterAwayFromStale
     } else {
         OwnSample::Show

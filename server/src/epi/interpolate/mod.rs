@@ -72,32 +72,38 @@ pub enum OwnSample {
 
 /// Bit rows (`ceil(width / 64)` words a row) of the pixels whose 5 × 5 window holds a stale
 /// point (age [`crate::render_cache::STALE_AGE`] or more, finite), into `out`: the stale
-/// points' bits dilated by two pixels each way.
-pub fn near_stale_rows(points: &PointImage, out: &mut Vec<u64>) {
+/// points' bits dilated by two pixels each way. `rows` is scratch (the row-dilated bits),
+/// kept by the caller so that a frame in motion allocates nothing.
+pub fn near_stale_rows(points: &PointImage, rows: &mut Vec<u64>, out: &mut Vec<u64>) {
     let (w, h) = (points.width as usize, points.height as usize);
     let words = w.div_ceil(64);
     out.clear();
     out.resize(h * words, 0);
+    rows.clear();
+    rows.resize(h * words, 0);
     if w == 0 {
         return;
     }
-    // The stale points' bits, dilated along their row.
-    let mut rows = vec![0u64; h * words];
+    // The stale points' bits, then dilated along their row in place: each word reads its
+    // neighbours' bits before the dilation (the previous one kept aside, the next one not
+    // yet written).
     rows.par_chunks_mut(words).zip(points.age.par_chunks(w)).for_each(|(row, ages)| {
         for (x, &a) in ages.iter().enumerate() {
             if (crate::render_cache::STALE_AGE..f32::INFINITY).contains(&a) {
                 row[x / 64] |= 1 << (x % 64);
             }
         }
-        let s: Vec<u64> = row.to_vec();
+        let mut prev = 0u64;
         for j in 0..words {
-            let (prev, next) = (if j > 0 { s[j - 1] } else { 0 }, s.get(j + 1).copied().unwrap_or(0));
-            let up = s[j] << 1 | s[j] << 2 | prev >> 63 | prev >> 62;
-            let down = s[j] >> 1 | s[j] >> 2 | next << 63 | next << 62;
-            row[j] = (s[j] | up | down) & valid_bits(w, j);
+            let (cur, next) = (row[j], row.get(j + 1).copied().unwrap_or(0));
+            let up = cur << 1 | cur << 2 | prev >> 63 | prev >> 62;
+            let down = cur >> 1 | cur >> 2 | next << 63 | next << 62;
+            row[j] = (cur | up | down) & valid_bits(w, j);
+            prev = cur;
         }
     });
     // Then across rows.
+    let rows = &*rows;
     out.par_chunks_mut(words).enumerate().for_each(|(y, o)| {
         for r in y.saturating_sub(2)..(y + 3).min(h) {
             for (a, b) in o.iter_mut().zip(&rows[r * words..(r + 1) * words]) {
@@ -351,9 +357,8 @@ impl WordPlan {
         let has = f.row(y, Flags::HAS)[j];
         let usable = f.row(y, Flags::USABLE)[j];
         let complex = f.row(y, Flags::COMPLEX)[j];
-        let shown = usable | (complex & has);
         let own = match input.options.own_sample {
-            OwnSample::Show => shown,
+            OwnSample::Show => usable | (complex & has),
             OwnSample::Filter => 0,
             OwnSample::FilterAwayFromStale => (complex & has) | (usable & input.near_stale.get(y * f.words + j).copied().unwrap_or(0)),
         } & valid;

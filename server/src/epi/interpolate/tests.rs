@@ -161,7 +161,7 @@ fn every_path_and_instruction_set_equals_a_per_pixel_loop_bit_for_bit() {
             // Computes the reachability the interpolation reads.
             epi.reconstruct(&points, background, &InterpOptions::default(), false, &mut image, &mut weights, &mut times);
             let mut near_stale = Vec::new();
-            near_stale_rows(&points, &mut near_stale);
+            near_stale_rows(&points, &mut Vec::new(), &mut near_stale);
             for own_sample in [OwnSample::Show, OwnSample::Filter, OwnSample::FilterAwayFromStale] {
                 for fallback in [false, true] {
                     let options = InterpOptions { sigma: 0.9, own_sample, fallback };
