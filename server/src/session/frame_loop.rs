@@ -117,9 +117,9 @@ pub const REST_AFTER_FRAMES: u32 = 8;
 /// `gi` showed 17.7–18.7 dB at 0.25 s instead of 21.7–24, its first answers a band of rows).
 const COHERENT_AFTER_FRAMES: u32 = REST_AFTER_FRAMES + 10;
 
-/// What a pixel with its own usable sample shows after `still_frames` still frames: at rest
-/// (from [`REST_AFTER_FRAMES`], as the session's pacing counts it) the sample as shaded (the
-/// Render Cache rule, [`OwnSample::Show`]); in motion the mean with its reachable neighbours
+/// What a pixel with its own usable sample shows `still_frames` frames after the camera last
+/// moved: with the camera still (from [`REST_AFTER_FRAMES`]) the sample as shaded (the
+/// Render Cache rule, [`OwnSample::Show`]); while it moves the mean with its reachable neighbours
 /// like any other pixel, except near a stale point or in a complex pixel
 /// ([`OwnSample::FilterAwayFromStale`]; the kernel's σ of 0.8 px, edges respected). In
 /// motion most pixels hold a point shaded once, whose Monte Carlo noise (16 shadow rays in a
@@ -132,7 +132,9 @@ const COHERENT_AFTER_FRAMES: u32 = REST_AFTER_FRAMES + 10;
 /// diluted. At rest the points converge (a re-picked point averages its samples) and
 /// filtering them only blurs: kept for the first 80 still frames, a still 64²
 /// `cornell-point` stalled at 31.5 dB where showing reaches 41.0 by frame 60 (the point
-/// light's hot spot on the ceiling spread).
+/// light's hot spot on the ceiling spread). An object's move does not count as motion here:
+/// the rest of the view is still and its points converged, and filtered they mottled
+/// `cornell-point`'s hot spot while `tallbox` moved.
 pub fn own_sample_after(still_frames: u32) -> OwnSample {
     if still_frames < REST_AFTER_FRAMES {
         OwnSample::FilterAwayFromStale
@@ -234,6 +236,9 @@ pub(super) struct FrameLoop {
     /// Frames since the camera last changed or an object last moved (see
     /// [`frame_requests`]).
     still_frames: u32,
+    /// Frames since the camera last moved (object moves do not count): what a pixel's own
+    /// sample shows ([`own_sample_after`]).
+    camera_still_frames: u32,
     /// Whether the cache's noise gains are of this still view (`request_next`).
     gains_ready: bool,
     /// Per object: its current object-to-world transform (for edge finding).
@@ -330,6 +335,7 @@ impl FrameLoop {
             last_move_epoch: 0,
             // A new session is at rest until the camera or an object first moves.
             still_frames: REST_AFTER_FRAMES,
+            camera_still_frames: REST_AFTER_FRAMES,
             gains_ready: false,
             transforms: p.scene.objects.iter().map(|o| o.transform).collect(),
             normal_to_world: p.scene.objects.iter().map(|o| normal_matrix(&o.transform)).collect(),
@@ -470,6 +476,7 @@ impl FrameLoop {
         let outstanding = self.dispatcher.outstanding_requests() as usize / parts as usize;
         let budget = frame_requests(per_frame, max_outstanding.saturating_sub(outstanding), self.still_frames);
         self.still_frames = self.still_frames.saturating_add(1);
+        self.camera_still_frames = self.camera_still_frames.saturating_add(1);
         let cfg = SamplingConfig { sparseness: self.settings.sparseness, max_age_frames: self.settings.max_age_frames as f32 };
         self.picks.clear();
         if budget > 0 {
@@ -551,7 +558,7 @@ impl FrameLoop {
         let counts = if epr {
             let background = self.cache.background();
             let (points, image, weights) = self.cache.reconstruction_target();
-            let opts = InterpOptions { own_sample: own_sample_after(self.still_frames), ..InterpOptions::default() };
+            let opts = InterpOptions { own_sample: own_sample_after(self.camera_still_frames), ..InterpOptions::default() };
             let r = self.epi.reconstruct(points, background, &opts, s.complex_filter, image, weights, &mut self.times);
             let i = r.interp;
             FrameCounts { with_point: i.with_point, filled: i.filled, empty: i.empty, occluded, cache_points }
@@ -682,6 +689,7 @@ impl FrameLoop {
                     Ok(cam) => {
                         if cam != self.camera {
                             self.still_frames = 0;
+                            self.camera_still_frames = 0;
                         }
                         self.camera = cam;
                         self.cam_frame = cam.frame(self.width, self.height);
